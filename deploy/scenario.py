@@ -1,0 +1,69 @@
+"""Scenarios: a world configuration and an agent configuration, loaded from TOML.
+
+A scenario file has a name, a description, a ``[world]`` table (:class:`WorldConfig`) and an
+``[agent]`` table (:class:`AgentConfig`). Shipped scenarios (``swarmloc scenarios`` lists them)
+are the experimental setups ES1-ES3 of seed 000 table 2 and the four arenas of seed 001 §4.1.
+Unknown keys and impossible values are refused with a message that names them, before anything
+starts.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+
+from swarmloc.agents.foraging import AgentConfig
+from swarmloc.config import ConfigError, apply_overrides, from_dict, load_toml, to_dict
+from swarmloc.world.foraging import WorldConfig
+
+DEFAULT_SCENARIO = "ES1"
+
+
+@dataclass(frozen=True)
+class Scenario:
+    name: str = "custom"
+    description: str = ""
+    world: WorldConfig = field(default_factory=WorldConfig)
+    agent: AgentConfig = field(default_factory=AgentConfig)
+
+    def to_dict(self) -> dict:
+        return to_dict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "Scenario":
+        return from_dict(cls, data)
+
+    def replace(self, **world_changes) -> "Scenario":
+        return dataclasses.replace(self, world=dataclasses.replace(self.world, **world_changes))
+
+
+def builtin_names() -> list[str]:
+    folder = resources.files("swarmloc.deploy") / "scenarios"
+    return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml"))
+
+
+def scenario_data(name_or_path: str) -> dict:
+    """The raw dict of a shipped scenario (by name) or of a TOML file (by path)."""
+    path = Path(name_or_path)
+    if path.suffix == ".toml" or path.exists():
+        return load_toml(path)
+    names = builtin_names()
+    if name_or_path not in names:
+        import difflib
+
+        close = difflib.get_close_matches(name_or_path, names, n=1, cutoff=0.4)
+        hint = f"; did you mean '{close[0]}'?" if close else ""
+        raise ConfigError(
+            f"scenario '{name_or_path}': no such file or shipped scenario{hint} "
+            f"(shipped: {', '.join(names)})"
+        )
+    folder = resources.files("swarmloc.deploy") / "scenarios"
+    return load_toml(Path(str(folder / f"{name_or_path}.toml")))
+
+
+def load_scenario(name_or_path: str = DEFAULT_SCENARIO, overrides: list[str] = ()) -> Scenario:
+    """Load and validate a scenario, with ``section.key=value`` overrides applied."""
+    data = apply_overrides(scenario_data(name_or_path), list(overrides))
+    return Scenario.from_dict(data)
