@@ -40,6 +40,14 @@ from swarmloc.protocol.epuck import (
 
 NEST, PREY = 0, 1
 
+#: Stream id that separates the agents' generators from the world's (``[seed, stream, id]``).
+AGENT_STREAM = 1
+
+
+def agent_rng(seed: int, robot_id: int) -> np.random.Generator:
+    """Each agent's own generator, derived from the run seed and its robot id."""
+    return np.random.default_rng([seed, AGENT_STREAM, robot_id])
+
 #: Controller state codes reported in every Act: bits 0-1 the target (0 none = wander,
 #: 1 nest, 2 prey), bit 2 set when the robot knows both areas.
 TARGET_NONE, TARGET_NEST, TARGET_PREY = 0, 1, 2

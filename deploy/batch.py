@@ -14,14 +14,9 @@ from typing import Callable
 
 import numpy as np
 
-from swarmloc.agents.foraging import BrainOutput, ForagingBrain, Inbox, on_path
+from swarmloc.agents.foraging import BrainOutput, ForagingBrain, Inbox, agent_rng, on_path
 from swarmloc.deploy.scenario import Scenario
-from swarmloc.world.foraging import AGENT_STREAM, ForagingWorld, Observation
-
-
-def agent_rng(seed: int, robot_id: int) -> np.random.Generator:
-    """Each agent's own generator, derived from the run seed and its robot id."""
-    return np.random.default_rng([seed, AGENT_STREAM, robot_id])
+from swarmloc.world.foraging import ForagingWorld, Observation
 
 
 def inbox_from(observation: Observation, sent: BrainOutput | None, robot_ids: np.ndarray) -> Inbox:

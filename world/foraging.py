@@ -30,9 +30,8 @@ from swarmloc.world.medium import Deliveries, RabMedium, deliver
 from swarmloc.world.metrics import ForagingMetrics
 from swarmloc.world.sensors import SensorParams, ground_sensors, ir_proximity
 
-#: Stream ids that separate the world's generator from the agents' (``[seed, stream, id]``).
+#: Stream id of the world's generator (``[seed, stream]``); agents use stream 1 with their id.
 WORLD_STREAM = 0
-AGENT_STREAM = 1
 
 
 @dataclass(frozen=True)

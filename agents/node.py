@@ -1,0 +1,197 @@
+"""The agent node: one robot's brain in its own process, over Zenoh.
+
+A thin shell around :class:`ForagingBrain` with a batch of one:
+
+1. join: query ``world/join`` with a ``Join``; the world answers with the scenario and run seed;
+2. subscribe to this robot's ``sense`` key, then declare its liveliness token (the world waits
+   for it, so the first Sense never finds the agent deaf);
+3. on each Sense: decode, step the brain, publish the Act;
+4. stop on ``RunEnd``, on a final Sense, on SIGINT/SIGTERM, or when the world is gone for longer
+   than ``world_timeout_s``; close the session on the way out.
+
+A malformed Sense, or a neighbour's malformed payload inside a valid Sense, is rejected, counted
+and logged once; the agent keeps running.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import threading
+import time
+
+import numpy as np
+import zenoh
+
+from swarmloc.agents.foraging import AgentConfig, ForagingBrain, Inbox, SocialMessages, agent_rng
+from swarmloc.config import ConfigError, from_dict
+from swarmloc.protocol.epuck import EpuckBody
+from swarmloc.protocol.errors import ErrorCounter
+from swarmloc.protocol.keys import Keys
+from swarmloc.protocol.messages import (
+    EpuckAct,
+    EpuckSense,
+    ErrorReport,
+    Join,
+    ProtocolError,
+    RunEnd,
+    Welcome,
+    decode,
+    encode,
+)
+
+log = logging.getLogger("swarmloc.agent")
+
+
+class JoinError(RuntimeError):
+    """The world refused us, or could not be reached."""
+
+
+def join(session: zenoh.Session, keys: Keys, robot_id: int, timeout_s: float) -> Welcome:
+    """Ask the world for our scenario, retrying until ``timeout_s`` (the world may start later)."""
+    deadline = time.monotonic() + timeout_s
+    request = encode(Join(robot_id=robot_id, brain="foraging", pid=os.getpid()))
+    while True:
+        for reply in session.get(keys.join, payload=request, timeout=2.0):
+            if reply.ok is None:
+                continue
+            msg = decode(reply.ok.payload.to_bytes(), (Welcome, ErrorReport))
+            if isinstance(msg, ErrorReport):
+                raise JoinError(f"the world refused robot {robot_id}: {msg.field}: {msg.detail}")
+            return msg
+        if time.monotonic() > deadline:
+            raise JoinError(f"no world answered on {keys.join} within {timeout_s:.0f} s")
+        time.sleep(0.2)  # retry pacing for a world not started yet, not a readiness wait
+
+
+def brain_from_welcome(welcome: Welcome) -> ForagingBrain:
+    scenario = welcome.scenario
+    try:
+        config = from_dict(AgentConfig, scenario.get("agent", {}), "agent")
+        world = scenario.get("world", {})
+        body = from_dict(EpuckBody, world.get("body", {}), "world.body")
+        tick_s = float(world.get("tick_s", 0.1))
+    except (ConfigError, AttributeError, TypeError, ValueError) as exc:
+        raise JoinError(f"the world's scenario is not usable: {exc}") from None
+    rid = welcome.robot_id
+    return ForagingBrain(config, body, [rid], [agent_rng(welcome.seed, rid)], tick_s)
+
+
+class AgentNode:
+    def __init__(self, session: zenoh.Session, keys: Keys, robot_id: int, brain: ForagingBrain):
+        self.session = session
+        self.keys = keys
+        self.robot_id = robot_id
+        self.brain = brain
+        self.errors = ErrorCounter()
+        self.done = threading.Event()
+        self.end_reason = ""
+        self.last_sense_at = time.monotonic()
+        self.ticks = 0
+        self._capacity = brain.config.heard_capacity
+        self._decls = []
+
+    def _inbox(self, sense: EpuckSense) -> Inbox:
+        if not sense.received:
+            return Inbox.empty(self._capacity)
+        rows, contents = [], []
+        for msg in sense.received:
+            try:
+                contents.append(SocialMessages.decode([msg.payload], self._capacity))
+                rows.append(msg)
+            except ValueError as exc:
+                self.errors.record(f"robot {msg.sender_id}", "payload", exc)
+        if not rows:
+            return Inbox.empty(self._capacity)
+        content = SocialMessages(
+            *(np.concatenate([getattr(c, f) for c in contents]) for f in SocialMessages.__dataclass_fields__)
+        )
+        return Inbox(
+            receiver=np.zeros(len(rows), np.int64),
+            sender_id=np.array([m.sender_id for m in rows], np.int64),
+            range_m=np.array([m.range_m for m in rows]),
+            bearing_rad=np.array([m.bearing_rad for m in rows]),
+            content=content,
+        )
+
+    def _on_sense(self, sample: zenoh.Sample) -> None:
+        try:
+            sense = decode(sample.payload.to_bytes(), EpuckSense)
+            if sense.robot_id != self.robot_id:
+                raise ProtocolError("robot_id", f"{sense.robot_id} sent on the key of robot {self.robot_id}")
+        except ProtocolError as exc:
+            self.errors.record(str(sample.key_expr), "sense", exc)
+            return
+        self.last_sense_at = time.monotonic()
+        if sense.final:
+            self.end_reason = "final sense"
+            self.done.set()
+            return
+        out = self.brain.step(
+            np.array([sense.encoder_steps]),
+            np.array([sense.ir]),
+            np.array([sense.ground]),
+            self._inbox(sense),
+        )
+        payload = out.messages.encode(0) if out.sending[0] else None
+        act = EpuckAct(
+            tick=sense.tick,
+            robot_id=self.robot_id,
+            wheel_speed_steps_s=tuple(out.wheel_speed_steps_s[0].tolist()),
+            payload=payload,
+            state=int(out.state[0]),
+            pose_estimate=tuple(out.pose_estimate[0].tolist()),
+        )
+        self._act_pub.put(encode(act))
+        self.ticks += 1
+
+    def _on_end(self, sample: zenoh.Sample) -> None:
+        try:
+            end = decode(sample.payload.to_bytes(), RunEnd)
+        except ProtocolError as exc:
+            self.errors.record(str(sample.key_expr), "end", exc)
+            return
+        self.end_reason = f"run ended: {end.reason}"
+        self.done.set()
+
+    def declare(self) -> None:
+        s, k = self.session, self.keys
+        self._act_pub = s.declare_publisher(
+            k.act(self.robot_id), congestion_control=zenoh.CongestionControl.BLOCK, express=True
+        )
+        self._decls.append(s.declare_subscriber(k.run_end, self._on_end))
+        self._decls.append(s.declare_subscriber(k.sense(self.robot_id), self._on_sense))
+        # Declared last: the world sees us only once we can hear it.
+        self._token = s.liveliness().declare_token(k.alive(self.robot_id))
+
+    def wait(self, stop: threading.Event, world_timeout_s: float) -> str:
+        """Wait until the run ends, we are told to stop, or the world is silent too long."""
+        while not self.done.is_set():
+            if stop.wait(0.2):
+                return "signal"
+            if time.monotonic() - self.last_sense_at > world_timeout_s:
+                return f"no sense from the world for {world_timeout_s:.0f} s"
+        return self.end_reason
+
+
+def run_agent(
+    session: zenoh.Session,
+    keys: Keys,
+    robot_id: int,
+    stop: threading.Event,
+    *,
+    join_timeout_s: float = 120.0,
+    world_timeout_s: float = 300.0,
+) -> int:
+    """Run one agent to the end of the run; returns a process exit code."""
+    try:
+        welcome = join(session, keys, robot_id, join_timeout_s)
+        brain = brain_from_welcome(welcome)
+    except (JoinError, ProtocolError) as exc:
+        log.error("robot %d: %s", robot_id, exc)
+        return 2
+    node = AgentNode(session, keys, robot_id, brain)
+    node.declare()
+    reason = node.wait(stop, world_timeout_s)
+    log.info("robot %d: %s after %d ticks; rejected %s", robot_id, reason, node.ticks, dict(node.errors.counts))
+    return 0

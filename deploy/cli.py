@@ -1,0 +1,273 @@
+"""The ``swarmloc`` command.
+
+- ``swarmloc run [SCENARIO]``: router + world-server + N agent processes on this machine;
+  progress, metrics at the end, a run folder with configuration, seed and results.
+- ``swarmloc world SCENARIO`` / ``swarmloc agent --robot ID`` / ``swarmloc router``: one piece
+  each, to run on different machines with ``-e/--connect``.
+- ``swarmloc batch [SCENARIO]``: the same run in one process with no Zenoh (batch engine).
+- ``swarmloc scenarios``: the shipped scenarios.
+
+Each subcommand is ``main_X(args) -> int``; parsing is separate. Options override the scenario; a
+bad scenario file or option stops the command before anything starts, naming the problem.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import signal
+import sys
+import threading
+import time
+from pathlib import Path
+
+from swarmloc.config import ConfigError
+
+log = logging.getLogger("swarmloc")
+
+
+# -- shared option groups ---------------------------------------------------------------------
+
+
+def _scenario_args(p: argparse.ArgumentParser, positional: bool = True) -> None:
+    if positional:
+        p.add_argument("scenario", nargs="?", default="ES1",
+                       help="shipped scenario name (see `swarmloc scenarios`) or a .toml/.json file; default ES1")
+    g = p.add_argument_group("scenario overrides")
+    g.add_argument("--robots", type=int, help="number of robots")
+    g.add_argument("--strategy", help="NC, SSGIKF, DSGIKF, SSGIFF or DSGIFF")
+    g.add_argument("--beta", type=float, help="Fermi beta of the SGIFFs")
+    g.add_argument("--seed", type=int, help="run seed")
+    g.add_argument("--duration-s", type=float, help="simulated duration in seconds")
+    g.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="any scenario value, e.g. --set world.medium.range_m=0.25 (repeatable)")
+
+
+def load_from_args(args):
+    """The scenario named by the arguments, with every override applied and validated."""
+    import json as _json
+
+    from swarmloc.deploy.scenario import Scenario, load_scenario
+
+    overrides = list(args.set)
+    for flag, key in (("robots", "world.robots"), ("strategy", "agent.strategy"), ("beta", "agent.beta"),
+                      ("seed", "world.seed"), ("duration_s", "world.duration_s")):
+        value = getattr(args, flag, None)
+        if value is not None:
+            overrides.append(f"{key}={_json.dumps(value)}")
+    if str(args.scenario).endswith(".json"):
+        from swarmloc.config import apply_overrides
+
+        try:
+            data = _json.loads(Path(args.scenario).read_text())
+        except (OSError, ValueError) as exc:
+            raise ConfigError(f"{args.scenario}: cannot read scenario: {exc}") from None
+        return Scenario.from_dict(apply_overrides(data, overrides))
+    return load_scenario(args.scenario, overrides)
+
+
+def _transport(p: argparse.ArgumentParser) -> None:
+    from swarmloc.protocol.session import add_transport_args
+
+    add_transport_args(p)
+
+
+def _run_name(p: argparse.ArgumentParser, required: bool = False) -> None:
+    p.add_argument("--run", required=required, default=None if required else "local",
+                   help="run name: the key prefix swarmloc/<run>/ that keeps runs apart")
+
+
+def _install_stop() -> threading.Event:
+    stop = threading.Event()
+
+    def handler(signum, frame):
+        stop.set()
+
+    signal.signal(signal.SIGINT, handler)
+    signal.signal(signal.SIGTERM, handler)
+    return stop
+
+
+# -- subcommands ------------------------------------------------------------------------------
+
+
+def main_scenarios(args) -> int:
+    from swarmloc.deploy.scenario import builtin_names, scenario_data
+
+    for name in builtin_names():
+        print(f"{name:14s} {scenario_data(name).get('description', '')}")
+    return 0
+
+
+def main_router(args) -> int:
+    from swarmloc.protocol.session import bound_endpoints, open_session, session_config
+
+    stop = _install_stop()
+    config = session_config(mode="router", listen=args.listen or ["tcp/127.0.0.1:7447"],
+                            connect=args.connect or (), config_file=args.config)
+    with open_session(config) as session:
+        endpoints = bound_endpoints(session)
+        if args.announce:
+            print(json.dumps({"endpoints": endpoints}), flush=True)
+        else:
+            print(f"router listening on {', '.join(endpoints)}", flush=True)
+        stop.wait()
+    return 0
+
+
+def main_world(args) -> int:
+    from swarmloc.protocol.keys import Keys
+    from swarmloc.protocol.session import config_from_args, open_session
+    from swarmloc.world.foraging import ForagingWorld
+    from swarmloc.world.server import WorldServer
+
+    scenario = load_from_args(args)
+    keys = Keys(args.run)
+    stop = _install_stop()
+    out = Path(args.out) if args.out else None
+    if out:
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "scenario.json").write_text(json.dumps(scenario.to_dict(), indent=2))
+    with open_session(config_from_args(args)) as session:
+        server = WorldServer(session, keys, ForagingWorld(scenario.world), scenario.to_dict(),
+                             realtime=args.realtime, act_timeout_s=args.act_timeout_s,
+                             join_timeout_s=args.join_timeout_s)
+        server.declare()
+        watcher = threading.Thread(target=lambda: (stop.wait(), server.stop()), daemon=True)
+        watcher.start()
+        try:
+            if not server.wait_for_agents():
+                result = server.finish("agents missing")
+                code = 3
+            else:
+                log.info("all %d agents joined; running", scenario.world.robots)
+                result = server.run()
+                code = 0 if result["reason"] == "completed" else 4
+        finally:
+            server.close()
+    result.update(scenario=scenario.name, seed=scenario.world.seed, run=args.run,
+                  strategy=scenario.agent.strategy, robots=scenario.world.robots,
+                  mode="realtime" if args.realtime else "lockstep")
+    if out:
+        (out / "results.json").write_text(json.dumps(result, indent=2))
+    else:
+        print(json.dumps(result))
+    return code
+
+
+def main_agent(args) -> int:
+    from swarmloc.agents.node import run_agent
+    from swarmloc.protocol.keys import Keys
+    from swarmloc.protocol.session import config_from_args, open_session
+
+    stop = _install_stop()
+    keys = Keys(args.run)
+    with open_session(config_from_args(args)) as session:
+        return run_agent(session, keys, args.robot, stop, join_timeout_s=args.join_timeout_s,
+                         world_timeout_s=args.world_timeout_s)
+
+
+def main_batch(args) -> int:
+    from swarmloc.deploy.batch import run_batch
+
+    scenario = load_from_args(args)
+    t0 = time.perf_counter()
+    result = run_batch(scenario)
+    summary = {"scenario": scenario.name, "strategy": scenario.agent.strategy,
+               "seed": scenario.world.seed, "robots": scenario.world.robots,
+               "wall_s": round(time.perf_counter() - t0, 2), "metrics": result.metrics}
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        _print_metrics(summary)
+    return 0
+
+
+def main_run(args) -> int:
+    from swarmloc.deploy.run import run_local
+
+    scenario = load_from_args(args)
+    return run_local(scenario, run_name=args.run, out_root=Path(args.out), realtime=args.realtime,
+                     quiet=args.quiet, join_timeout_s=args.join_timeout_s)
+
+
+def _print_metrics(summary: dict) -> None:
+    m = summary["metrics"]
+    n = summary["robots"]
+    recruit = m.get("recruitment_time_s")
+    print(f"scenario {summary['scenario']}  strategy {summary['strategy']}  seed {summary['seed']}  robots {n}")
+    print(f"  robots that found both areas : {m['robots_found_both']}/{n}")
+    print(f"  recruitment time (all robots): {'%.1f s' % recruit if recruit is not None else 'not reached'}")
+    print(f"  round trips nest-prey-nest   : {m['round_trips_total']}")
+    frac = m.get("on_path_fraction_mean")
+    print(f"  robots on the path (2nd half): {'%.0f %%' % (100 * frac) if frac is not None else '-'}")
+
+
+# -- parsing ----------------------------------------------------------------------------------
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="swarmloc", description=__doc__.splitlines()[0])
+    parser.add_argument("-v", "--verbose", action="store_true", help="log more")
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    p = sub.add_parser("run", help="launch a swarm of processes on this machine")
+    _scenario_args(p)
+    p.add_argument("--run", default=None, help="run name (default: scenario-strategy-seed-random)")
+    p.add_argument("--out", default="runs", help="folder for run folders (default: runs/)")
+    p.add_argument("--realtime", action="store_true", help="tick on the wall clock instead of lockstep")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--join-timeout-s", type=float, default=180.0)
+    p.set_defaults(func=main_run)
+
+    p = sub.add_parser("world", help="run the world-server")
+    _scenario_args(p)
+    _run_name(p)
+    _transport(p)
+    p.add_argument("--out", default=None, help="folder for scenario.json and results.json")
+    p.add_argument("--realtime", action="store_true")
+    p.add_argument("--act-timeout-s", type=float, default=10.0)
+    p.add_argument("--join-timeout-s", type=float, default=180.0)
+    p.set_defaults(func=main_world)
+
+    p = sub.add_parser("agent", help="run one robot's agent")
+    p.add_argument("--robot", type=int, required=True, help="robot id")
+    _run_name(p)
+    _transport(p)
+    p.add_argument("--join-timeout-s", type=float, default=180.0)
+    p.add_argument("--world-timeout-s", type=float, default=60.0)
+    p.set_defaults(func=main_agent)
+
+    p = sub.add_parser("router", help="run a Zenoh router (no zenohd needed)")
+    _transport(p)
+    p.add_argument("--announce", action="store_true", help="print the bound endpoints as one JSON line")
+    p.set_defaults(func=main_router)
+
+    p = sub.add_parser("batch", help="run a scenario in one process, no Zenoh")
+    _scenario_args(p)
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=main_batch)
+
+    p = sub.add_parser("scenarios", help="list the shipped scenarios")
+    p.set_defaults(func=main_scenarios)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
+                        format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    try:
+        return args.func(args)
+    except ConfigError as exc:
+        print(f"swarmloc: error: {exc}", file=sys.stderr)
+        return 2
+    except ValueError as exc:  # a bad transport flag, run name, ...
+        print(f"swarmloc: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,98 @@
+"""Launch and supervise a local swarm: a Zenoh router, the world-server and N agent processes.
+
+Every piece is its own OS process, started with ``subprocess`` (never fork: a forked child that
+opens a Zenoh session hangs, see ZENOH.md) in its own process group, so that everything started
+is stopped by id at the end, even on an error or Ctrl-C.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+
+PYTHON = [sys.executable, "-m", "swarmloc"]
+
+
+@dataclass
+class Supervisor:
+    """Owns child processes; :meth:`stop_all` ends every one of them, by process group."""
+
+    procs: list[subprocess.Popen] = field(default_factory=list)
+
+    def start(self, args: list[str], *, log_path: Path | None = None, stdout=None) -> subprocess.Popen:
+        out = stdout
+        if out is None:
+            out = open(log_path, "ab") if log_path else subprocess.DEVNULL
+        proc = subprocess.Popen(
+            PYTHON + args,
+            stdout=out,
+            stderr=subprocess.STDOUT if log_path or stdout is not None else subprocess.DEVNULL,
+            stdin=subprocess.DEVNULL,
+            start_new_session=True,
+            env={**os.environ, "PYTHONUNBUFFERED": "1"},
+        )
+        if log_path and out is not subprocess.PIPE:
+            out.close()  # the child holds its own descriptor
+        self.procs.append(proc)
+        return proc
+
+    def stop_all(self, grace_s: float = 5.0) -> None:
+        for proc in self.procs:
+            if proc.poll() is None:
+                _signal_group(proc, signal.SIGTERM)
+        deadline = time.monotonic() + grace_s
+        for proc in self.procs:
+            left = max(0.0, deadline - time.monotonic())
+            try:
+                proc.wait(timeout=left)
+            except subprocess.TimeoutExpired:
+                _signal_group(proc, signal.SIGKILL)
+                proc.wait()
+
+
+def _signal_group(proc: subprocess.Popen, sig: int) -> None:
+    try:
+        os.killpg(proc.pid, sig)
+    except ProcessLookupError:
+        pass
+
+
+@contextmanager
+def supervised():
+    sup = Supervisor()
+    try:
+        yield sup
+    finally:
+        sup.stop_all()
+
+
+def start_router(sup: Supervisor, listen: str = "tcp/127.0.0.1:0", timeout_s: float = 30.0) -> tuple[subprocess.Popen, str]:
+    """Start ``swarmloc router``; return it and the endpoint it really listens on.
+
+    The router prints one JSON line with its bound endpoints once it is listening: that line is
+    the readiness signal.
+    """
+    proc = sup.start(["router", "-l", listen, "--announce"], stdout=subprocess.PIPE)
+    box: dict = {}
+
+    def read():
+        line = proc.stdout.readline()
+        box["line"] = line
+
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
+    reader.join(timeout_s)
+    line = box.get("line", b"")
+    if not line:
+        raise RuntimeError(f"the router did not announce its endpoint within {timeout_s:.0f} s")
+    endpoints = json.loads(line)["endpoints"]
+    tcp = [e for e in endpoints if e.startswith("tcp/")]
+    return proc, (tcp or endpoints)[0]

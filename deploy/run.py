@@ -1,0 +1,109 @@
+"""``swarmloc run``: a whole swarm of processes on this machine, with progress and results.
+
+Starts a router (its bound port is its readiness signal), the world-server and one agent process
+per robot, all as clients of the router on loopback; follows the world's state for progress;
+waits for the world to finish; prints the metrics; stops every process it started.
+"""
+
+from __future__ import annotations
+
+import json
+import secrets
+import sys
+import threading
+import time
+from pathlib import Path
+
+from swarmloc.deploy.launch import start_router, supervised
+from swarmloc.deploy.scenario import Scenario
+
+
+def _progress_follower(endpoint: str, run: str, total_ticks: int, quiet: bool):
+    """Follow the world's state stream and show a progress bar; returns a stop function."""
+    from swarmloc.protocol.keys import Keys
+    from swarmloc.protocol.messages import ProtocolError, WorldState, decode
+    from swarmloc.protocol.session import open_session, session_config
+
+    session = open_session(session_config(mode="client", connect=[endpoint]))
+    latest = {"tick": 0, "round_trips": 0, "alive": 0}
+
+    def on_state(sample):
+        try:
+            s = decode(sample.payload.to_bytes(), WorldState)
+        except ProtocolError:
+            return
+        latest.update(tick=s.tick, round_trips=s.round_trips, alive=sum(s.alive))
+
+    sub = session.declare_subscriber(Keys(run).world_state, on_state)
+    done = threading.Event()
+    thread = None
+    if not quiet and sys.stderr.isatty():
+        from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
+
+        def show():
+            with Progress(TextColumn("[bold]{task.description}"), BarColumn(),
+                          TextColumn("{task.completed}/{task.total} ticks"),
+                          TextColumn("{task.fields[info]}"), TimeRemainingColumn(),
+                          transient=True) as bar:
+                task = bar.add_task("swarm", total=total_ticks, info="waiting for agents")
+                while not done.wait(0.25):
+                    bar.update(task, completed=latest["tick"],
+                               info=f"{latest['alive']} alive, {latest['round_trips']} round trips")
+
+        thread = threading.Thread(target=show, daemon=True)
+        thread.start()
+
+    def stop():
+        done.set()
+        if thread:
+            thread.join(2)
+        sub.undeclare()
+        session.close()
+
+    return stop
+
+
+def run_local(scenario: Scenario, *, run_name: str | None, out_root: Path, realtime: bool,
+              quiet: bool, join_timeout_s: float = 180.0) -> int:
+    w = scenario.world
+    run = run_name or f"{scenario.name}-{scenario.agent.strategy}-s{w.seed}-{secrets.token_hex(3)}".replace(".", "_")
+    out = out_root / run
+    out.mkdir(parents=True, exist_ok=True)
+    scenario_file = out / "scenario.json"
+    scenario_file.write_text(json.dumps(scenario.to_dict(), indent=2))
+    log_dir = out / "logs"
+    log_dir.mkdir(exist_ok=True)
+    say = (lambda *a: None) if quiet else (lambda *a: print(*a, file=sys.stderr, flush=True))
+    t0 = time.perf_counter()
+    with supervised() as sup:
+        _, endpoint = start_router(sup)
+        say(f"router on {endpoint}; run '{run}': {w.robots} robots, {scenario.agent.strategy}, "
+            f"seed {w.seed}, {w.duration_s:.0f} s simulated ({'real time' if realtime else 'lockstep'})")
+        transport = ["-m", "client", "-e", endpoint, "--run", run]
+        world_args = ["world", str(scenario_file), *transport, "--out", str(out),
+                      "--join-timeout-s", str(join_timeout_s)]
+        if realtime:
+            world_args.append("--realtime")
+        world = sup.start(world_args, log_path=log_dir / "world.log")
+        for i in range(w.robots):
+            sup.start(["agent", "--robot", str(i), *transport, "--join-timeout-s", str(join_timeout_s)],
+                      log_path=log_dir / f"agent-{i}.log")
+        stop_progress = _progress_follower(endpoint, run, w.n_ticks, quiet)
+        try:
+            code = world.wait()
+        finally:
+            stop_progress()
+    results_file = out / "results.json"
+    if code != 0 or not results_file.exists():
+        print(f"swarmloc: the world-server failed (exit {code}); see {log_dir / 'world.log'}", file=sys.stderr)
+        return 1
+    result = json.loads(results_file.read_text())
+    from swarmloc.deploy.cli import _print_metrics
+
+    _print_metrics(result)
+    t = result["transport"]
+    print(f"  transport                    : {t['ticks']} ticks in {t['wall_s']} s = {t['ticks_per_s']} ticks/s "
+          f"(tick p50 {t['tick_ms_p50']} ms, p99 {t['tick_ms_p99']} ms)")
+    print(f"  rejected messages            : {sum(result['rejected'].values())}")
+    print(f"run folder: {out}  ({time.perf_counter() - t0:.0f} s)")
+    return 0

@@ -1,0 +1,229 @@
+"""Zenoh session configuration from the conventional transport flags.
+
+Every swarmloc command takes the same flags, with Zenoh's own names (STYLE.md item 6):
+``-m/--mode``, ``-e/--connect``, ``-l/--listen``, ``-c/--config``. :func:`session_config` turns
+them into a ``zenoh.Config`` with the settings that ZENOH.md measured to matter:
+
+- multicast scouting and gossip off (``zenoh.open`` then takes about 1 ms instead of 500 ms, and
+  tests cannot discover each other), explicit endpoints instead;
+- scouting delay 0 while multicast is off (otherwise a router waits 500 ms in ``zenoh.open``
+  scouting for nobody);
+- a client that connects to explicit endpoints waits for its router (``connect/timeout_ms: -1``)
+  instead of failing at once when the router is not up yet;
+- a session that listens has its (read-only) admin space enabled, so that
+  :func:`bound_endpoints` can read the port it actually got for ``tcp/127.0.0.1:0``.
+
+Explicit arguments override the config file; an argument left at None leaves the file's value.
+"""
+
+from __future__ import annotations
+
+import argparse
+import functools
+import ipaddress
+import json
+import os
+import re
+from collections.abc import Iterable
+
+import zenoh
+
+MODES = ("peer", "client", "router")
+#: Protocols whose address is ``host:port``.
+IP_PROTOCOLS = ("tcp", "udp", "tls", "quic", "ws")
+#: Protocols whose address is a path or device name.
+OTHER_PROTOCOLS = ("unixsock-stream", "unixpipe", "serial", "vsock")
+
+_HOSTNAME_RE = re.compile(r"[A-Za-z0-9]([A-Za-z0-9.-]{0,251}[A-Za-z0-9])?")
+
+
+def add_transport_args(parser: argparse.ArgumentParser) -> None:
+    """Add ``-m/--mode``, ``-e/--connect``, ``-l/--listen``, ``-c/--config`` to ``parser``."""
+    group = parser.add_argument_group("Zenoh transport")
+    group.add_argument(
+        "-m", "--mode", choices=MODES, default=None,
+        help="Zenoh session mode (default: the config file's, else client)",
+    )  # fmt: skip
+    group.add_argument(
+        "-e", "--connect", action="append", default=None, metavar="ENDPOINT",
+        help="endpoint to connect to, e.g. tcp/127.0.0.1:7447 (repeatable)",
+    )  # fmt: skip
+    group.add_argument(
+        "-l", "--listen", action="append", default=None, metavar="ENDPOINT",
+        help="endpoint to listen on, e.g. tcp/127.0.0.1:0 for a free port (repeatable)",
+    )  # fmt: skip
+    group.add_argument(
+        "-c", "--config", default=None, metavar="FILE", help="Zenoh configuration file (JSON5)"
+    )
+
+
+def validate_endpoint(endpoint: str, flag: str = "-e/--connect") -> str:
+    """Return ``endpoint`` if it looks like a Zenoh endpoint, else ValueError naming ``flag``.
+
+    ``tcp|udp|tls|quic|ws/<host>:<port>`` (host a name, an IPv4 address or a bracketed IPv6
+    address, port 0..65535), or ``unixsock-stream|unixpipe|serial|vsock/<address>``; Zenoh's
+    ``?metadata`` and ``#config`` suffixes are allowed.
+    """
+    if type(endpoint) is not str:
+        raise ValueError(f"{flag}: endpoint must be a str, got {type(endpoint).__name__}")
+    protocol, sep, rest = endpoint.partition("/")
+    address = re.split(r"[?#]", rest, maxsplit=1)[0]
+    problem = None
+    if not sep or protocol not in IP_PROTOCOLS + OTHER_PROTOCOLS:
+        problem = (
+            f"unknown protocol {protocol!r} (expected one of {IP_PROTOCOLS + OTHER_PROTOCOLS})"
+        )
+    elif protocol in OTHER_PROTOCOLS:
+        if not address:
+            problem = "missing address"
+    else:
+        problem = _host_port_problem(address)
+    if problem is not None:
+        raise ValueError(f"{flag}: bad endpoint {endpoint!r}: {problem}")
+    return endpoint
+
+
+def _host_port_problem(address: str) -> str | None:
+    host, sep, port = address.rpartition(":")
+    if not sep or not host:
+        return "expected <host>:<port>"
+    if not (port.isascii() and port.isdigit()) or int(port) > 65535:
+        return f"bad port {port!r}"
+    if host.startswith("["):
+        if not host.endswith("]"):
+            return f"bad IPv6 address {host!r}"
+        try:
+            ipaddress.IPv6Address(host[1:-1])
+        except ValueError:
+            return f"bad IPv6 address {host!r}"
+    elif _HOSTNAME_RE.fullmatch(host) is None:
+        return f"bad host {host!r}"
+    return None
+
+
+def session_config(
+    mode: str | None = "client",
+    connect: Iterable[str] = (),
+    listen: Iterable[str] = (),
+    config_file: str | os.PathLike | None = None,
+    multicast_scouting: bool | None = False,
+    admin_space: bool | None = None,
+) -> zenoh.Config:
+    """A ``zenoh.Config`` for the transport flags.
+
+    Starts from ``config_file`` (JSON5) if given, else from Zenoh's defaults, then:
+
+    - ``mode``: ``"peer"``, ``"client"`` or ``"router"``; None keeps the file's mode, or
+      ``"client"`` if the file sets none;
+    - ``connect``/``listen``: endpoints, replacing the file's when non-empty;
+    - ``multicast_scouting``: False turns multicast scouting and gossip off and the scouting
+      delay to 0; True turns multicast scouting on; None leaves the file's scouting settings;
+    - ``admin_space``: True enables the read-only admin space (needed by
+      :func:`bound_endpoints`), False disables it; None enables it when ``listen`` is given and
+      otherwise leaves the file's setting;
+    - a client with connect endpoints waits for its router (``connect/timeout_ms: -1``) unless
+      the file sets a timeout.
+
+    Raises ValueError naming the flag (``-m/--mode``, ``-e/--connect``, ``-l/--listen``,
+    ``-c/--config``) for a bad value.
+    """
+    if isinstance(connect, str) or isinstance(listen, str):
+        raise TypeError("connect and listen take a sequence of endpoints, not a str")
+    connect = [validate_endpoint(e, "-e/--connect") for e in connect]
+    listen = [validate_endpoint(e, "-l/--listen") for e in listen]
+    if mode is not None and mode not in MODES:
+        raise ValueError(f"-m/--mode: {mode!r} is not one of {MODES}")
+
+    config = _load_config_file(config_file) if config_file is not None else zenoh.Config()
+    if mode is None:
+        mode = json.loads(config.get_json("mode")) or "client"
+    _insert(config, "mode", mode)
+    if connect:
+        _insert(config, "connect/endpoints", connect)
+    if listen:
+        _insert(config, "listen/endpoints", listen)
+    if multicast_scouting is not None:
+        _insert(config, "scouting/multicast/enabled", bool(multicast_scouting))
+        if not multicast_scouting:
+            _insert(config, "scouting/gossip/enabled", False)
+            _insert(config, "scouting/delay", 0)
+    if admin_space is None and listen:
+        admin_space = True
+    if admin_space is not None:
+        _insert(config, "adminspace/enabled", bool(admin_space))
+        _insert(config, "adminspace/permissions", {"read": True, "write": False})
+    if (
+        mode == "client"
+        and _has_endpoints(config, "connect/endpoints", mode)
+        and json.loads(config.get_json("connect/timeout_ms")) is None
+    ):
+        _insert(config, "connect/timeout_ms", -1)
+    return config
+
+
+def _insert(config: zenoh.Config, key: str, value: object) -> None:
+    config.insert_json5(key, json.dumps(value))  # JSON is valid JSON5
+
+
+def _has_endpoints(config: zenoh.Config, key: str, mode: str) -> bool:
+    endpoints = json.loads(config.get_json(key))
+    if isinstance(endpoints, dict):  # Zenoh allows per-mode lists: {"client": [...], ...}
+        endpoints = endpoints.get(mode)
+    return bool(endpoints)
+
+
+def _load_config_file(config_file: str | os.PathLike) -> zenoh.Config:
+    path = os.fspath(config_file)
+    if not os.path.isfile(path):
+        raise ValueError(f"-c/--config: no such file {path!r}")
+    try:
+        return zenoh.Config.from_file(path)
+    except zenoh.ZError as error:
+        raise ValueError(f"-c/--config: cannot load {path!r}: {error}") from None
+
+
+def config_from_args(args: argparse.Namespace) -> zenoh.Config:
+    """The session configuration for flags added by :func:`add_transport_args`."""
+    return session_config(
+        mode=args.mode,
+        connect=args.connect or (),
+        listen=args.listen or (),
+        config_file=args.config,
+    )
+
+
+@functools.cache
+def _init_logging() -> None:
+    # Zenoh logs nothing unless asked; RUST_LOG, when set, wins over "error".
+    zenoh.init_log_from_env_or("error")
+
+
+def open_session(config: zenoh.Config) -> zenoh.Session:
+    """Open a Zenoh session (initialising Zenoh's logging once per process).
+
+    Close it (``with open_session(...) as session:`` or ``session.close()``): a process with an
+    open session does not exit.
+    """
+    _init_logging()
+    return zenoh.open(config)
+
+
+def bound_endpoints(session: zenoh.Session, timeout_s: float = 2.0) -> list[str]:
+    """The locators this session actually listens on, e.g. ``["tcp/127.0.0.1:40693"]``.
+
+    For ``listen tcp/127.0.0.1:0`` this gives the port the OS chose. Read from the session's own
+    admin space, key ``@/<zid>/<mode>`` (a JSON object with a ``locators`` list), which is
+    answered locally; the session must have been opened with the admin space enabled
+    (:func:`session_config` does so when it listens). Raises RuntimeError if no answer came.
+    """
+    zid = str(session.info.zid())
+    for reply in session.get(f"@/{zid}/*", timeout=timeout_s):
+        if reply.ok is None:
+            continue
+        info = json.loads(reply.ok.payload.to_bytes())
+        if isinstance(info, dict) and info.get("zid") == zid:
+            return [str(locator) for locator in info.get("locators", [])]
+    raise RuntimeError(
+        f"no admin space answer from session {zid}: open it with the admin space enabled "
+        "(session_config(..., admin_space=True))"
+    )

@@ -1,0 +1,322 @@
+"""The world-server: runs :class:`ForagingWorld` over Zenoh for agent processes.
+
+A thin shell: decode, call the model, encode, publish. Per tick ``k`` it publishes ``Sense(k)`` to
+every live robot, waits for ``Act(k)`` from each, then steps the world.
+
+- *Lockstep* (default): waits for every live robot's Act, up to ``act_timeout_s``; a robot that
+  misses it keeps its previous wheel command for that tick and sends nothing. Given a seed, the run
+  is deterministic.
+- *Real time*: ticks at ``tick_s`` on the wall clock; a late Act means the previous command.
+
+Agents join through a query on ``world/join`` (answered with the scenario) and stay alive through a
+liveliness token: a robot whose token disappears stands still and the run goes on; a token that
+comes back revives it. A malformed, oversized or out-of-range message is rejected by the protocol,
+counted, logged once per sender, and changes nothing.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import zenoh
+
+from swarmloc.protocol.errors import ErrorCounter
+from swarmloc.protocol.keys import Keys
+from swarmloc.protocol.messages import (
+    EpuckAct,
+    EpuckSense,
+    ErrorReport,
+    Join,
+    ProtocolError,
+    RabMessage,
+    RunEnd,
+    Welcome,
+    WorldState,
+    decode,
+    encode,
+)
+from swarmloc.world.foraging import ForagingWorld
+
+log = logging.getLogger("swarmloc.world")
+
+#: State codes an agent reports; the world only needs "on the path" for the stability metric.
+_TARGET_MASK, _KNOWS_BOTH = 3, 4
+
+
+@dataclass
+class TickStats:
+    ticks: int = 0
+    started_s: float = 0.0
+    tick_durations_s: list = field(default_factory=list)
+    late_acts: int = 0
+    overruns: int = 0
+
+    def summary(self) -> dict:
+        d = np.array(self.tick_durations_s) if self.tick_durations_s else np.zeros(1)
+        wall = time.perf_counter() - self.started_s if self.started_s else 0.0
+        return {
+            "ticks": self.ticks,
+            "wall_s": round(wall, 3),
+            "ticks_per_s": round(self.ticks / wall, 2) if wall > 0 else None,
+            "tick_ms_p50": round(float(np.percentile(d, 50)) * 1e3, 3),
+            "tick_ms_p99": round(float(np.percentile(d, 99)) * 1e3, 3),
+            "late_acts": self.late_acts,
+            "overruns": self.overruns,
+        }
+
+
+class WorldServer:
+    """Serve one run of a foraging world to agent processes."""
+
+    def __init__(
+        self,
+        session: zenoh.Session,
+        keys: Keys,
+        world: ForagingWorld,
+        scenario: dict,
+        *,
+        realtime: bool = False,
+        act_timeout_s: float = 10.0,
+        join_timeout_s: float = 120.0,
+        state_every_ticks: int = 10,
+    ):
+        self.session = session
+        self.keys = keys
+        self.world = world
+        self.scenario = scenario
+        self.realtime = realtime
+        self.act_timeout_s = act_timeout_s
+        self.join_timeout_s = join_timeout_s
+        self.state_every_ticks = max(1, state_every_ticks)
+        n = world.n_robots
+        self.errors = ErrorCounter()
+        self.stats = TickStats()
+        self._cond = threading.Condition()
+        self._live = np.zeros(n, bool)  # liveliness tokens present
+        self._joined = np.zeros(n, bool)
+        self._current_tick = -1
+        self._got = np.zeros(n, bool)
+        self._cmd = np.zeros((n, 2))
+        self._sending = np.zeros(n, bool)
+        self._payloads: list[bytes | None] = [None] * n
+        self._state = np.zeros(n, np.int64)
+        self._stop = threading.Event()
+        self._decls = []
+
+    # -- Zenoh callbacks (run on Zenoh's threads) --------------------------------------------
+
+    def _on_join(self, query: zenoh.Query) -> None:
+        sender = f"join query on {query.key_expr}"
+        try:
+            payload = query.payload.to_bytes() if query.payload is not None else b""
+            join = decode(payload, Join)
+            if join.robot_id >= self.world.n_robots:
+                raise ProtocolError(
+                    "robot_id", f"{join.robot_id} is not a robot of this run (0..{self.world.n_robots - 1})"
+                )
+        except ProtocolError as exc:
+            self.errors.record(sender, "join", exc)
+            query.reply(self.keys.join, encode(ErrorReport.from_protocol_error(exc, "join")))
+            return
+        with self._cond:
+            self._joined[join.robot_id] = True
+        welcome = Welcome(
+            robot_id=join.robot_id, run=self.keys.run, seed=self.world.config.seed,
+            scenario=self.scenario,
+        )
+        query.reply(self.keys.join, encode(welcome))
+
+    def _on_alive(self, sample: zenoh.Sample) -> None:
+        try:
+            robot = Keys.robot_id_from_key(str(sample.key_expr))
+        except ValueError:
+            return  # the world's own token, or an observer's
+        if robot >= self.world.n_robots:
+            return
+        with self._cond:
+            if sample.kind == zenoh.SampleKind.PUT:
+                self._live[robot] = True
+            else:
+                self._live[robot] = False
+                log.warning("robot %d: agent gone, the robot stands still", robot)
+            self._cond.notify_all()
+
+    def _on_act(self, sample: zenoh.Sample) -> None:
+        key = str(sample.key_expr)
+        try:
+            robot = Keys.robot_id_from_key(key)
+            act = decode(sample.payload.to_bytes(), EpuckAct)
+            if act.robot_id != robot:
+                raise ProtocolError("robot_id", f"{act.robot_id} published on the key of robot {robot}")
+            if robot >= self.world.n_robots:
+                raise ProtocolError("robot_id", f"{robot} is not a robot of this run")
+        except (ProtocolError, ValueError) as exc:
+            self.errors.record(key, "act", exc)
+            return
+        with self._cond:
+            if act.tick != self._current_tick:
+                self.stats.late_acts += 1
+                return
+            if self._got[robot]:
+                self.errors.record(key, "duplicate act", ValueError(f"second act for tick {act.tick}"))
+                return
+            self._got[robot] = True
+            self._cmd[robot] = act.wheel_speed_steps_s
+            self._sending[robot] = act.payload is not None
+            self._payloads[robot] = act.payload
+            self._state[robot] = act.state
+            self._cond.notify_all()
+
+    # -- the loop ----------------------------------------------------------------------------
+
+    def declare(self) -> None:
+        s, k = self.session, self.keys
+        self._decls.append(s.declare_queryable(k.join, self._on_join))
+        self._decls.append(s.declare_subscriber(k.act_all, self._on_act))
+        self._decls.append(s.liveliness().declare_subscriber(k.alive_all, self._on_alive, history=True))
+        self._sense_pub = [
+            s.declare_publisher(k.sense(i), congestion_control=zenoh.CongestionControl.BLOCK, express=True)
+            for i in range(self.world.n_robots)
+        ]
+        self._state_pub = s.declare_publisher(k.world_state)
+        self._end_pub = s.declare_publisher(k.run_end, congestion_control=zenoh.CongestionControl.BLOCK)
+        self._token = s.liveliness().declare_token(k.world_alive)
+
+    def wait_for_agents(self) -> bool:
+        """Block until every robot has joined and holds a liveliness token."""
+        deadline = time.monotonic() + self.join_timeout_s
+        with self._cond:
+            while not (self._live.all() and self._joined.all()):
+                left = deadline - time.monotonic()
+                if left <= 0 or self._stop.is_set():
+                    missing = np.flatnonzero(~(self._live & self._joined)).tolist()
+                    log.error("agents missing after %.0f s: robots %s", self.join_timeout_s, missing)
+                    return False
+                self._cond.wait(min(left, 0.5))
+        return True
+
+    def stop(self) -> None:
+        self._stop.set()
+        with self._cond:
+            self._cond.notify_all()
+
+    def _senses(self, obs, outgoing: list[bytes | None]) -> None:
+        d = obs.deliveries
+        received: list[list[RabMessage]] = [[] for _ in range(self.world.n_robots)]
+        if len(d.sender):
+            for s, r, rng_m, b in zip(d.sender.tolist(), d.receiver.tolist(), d.range_m.tolist(), d.bearing_rad.tolist()):
+                payload = outgoing[s]
+                if payload is not None:
+                    received[r].append(RabMessage(s, rng_m, b, payload))
+        enc, ir, ground = obs.encoder_steps.tolist(), obs.ir.tolist(), obs.ground.tolist()
+        for i in np.flatnonzero(self.world.alive).tolist():
+            sense = EpuckSense(
+                tick=obs.tick, robot_id=i, encoder_steps=tuple(enc[i]), ir=tuple(ir[i]),
+                ground=tuple(ground[i]), received=tuple(received[i]),
+            )
+            self._sense_pub[i].put(encode(sense))
+
+    def _collect(self, tick_started: float) -> None:
+        """Wait for this tick's acts; return when all live robots answered or time is up."""
+        if self.realtime:
+            deadline = tick_started + self.world.config.tick_s
+        else:
+            deadline = time.monotonic() + self.act_timeout_s
+        with self._cond:
+            while True:
+                waiting = self.world.alive & self._live & ~self._got
+                if not waiting.any() or self._stop.is_set():
+                    break
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    if not self.realtime:
+                        log.warning("tick %d: no act from robots %s", self._current_tick, np.flatnonzero(waiting).tolist())
+                    break
+                self._cond.wait(left)
+
+    def run(self) -> dict:
+        """Run the whole scenario; return the metrics and the run's figures."""
+        world = self.world
+        n = world.n_robots
+        self.stats.started_s = time.perf_counter()
+        period = world.config.tick_s
+        next_tick_at = time.monotonic()
+        while not world.done and not self._stop.is_set():
+            t0 = time.perf_counter()
+            with self._cond:
+                # A robot whose agent died stands still; one whose agent came back moves again.
+                dead = world.alive & ~self._live
+                for i in np.flatnonzero(dead).tolist():
+                    world.kill(i)
+                for i in np.flatnonzero(~world.alive & self._live).tolist():
+                    world.revive(i)
+                self._current_tick = world.tick
+                self._got[:] = False
+                self._sending[:] = False
+                # Messages sent at the previous tick are delivered now; take them before this
+                # tick's acts (which may arrive as soon as the first Sense is out) replace them.
+                outgoing, self._payloads = self._payloads, [None] * n
+            obs = world.observe()
+            self._senses(obs, outgoing)
+            started = time.monotonic()
+            self._collect(started)
+            with self._cond:
+                self._current_tick = -1  # acts arriving now are late
+                missing = ~self._got
+                self.stats.late_acts += int((missing & world.alive).sum()) if self.realtime else 0
+                cmd = self._cmd.copy()  # a missing act keeps the previous command
+                sending = self._sending & self._got
+                on_path = ((self._state & _TARGET_MASK) != 0) & ((self._state & _KNOWS_BOTH) != 0)
+            world.step(cmd, sending, on_path)
+            self.stats.ticks += 1
+            self.stats.tick_durations_s.append(time.perf_counter() - t0)
+            if world.tick % self.state_every_ticks == 0 or world.done:
+                self._publish_state()
+            if self.realtime:
+                next_tick_at += period
+                pause = next_tick_at - time.monotonic()
+                if pause > 0:
+                    self._stop.wait(pause)
+                else:
+                    self.stats.overruns += 1
+        return self.finish("completed" if world.done else "stopped")
+
+    def _publish_state(self) -> None:
+        w = self.world
+        state = WorldState(
+            tick=w.tick, time_s=w.tick * w.config.tick_s,
+            poses=tuple(tuple(p) for p in w.pose.tolist()), alive=tuple(w.alive.tolist()),
+            round_trips=int(w.metrics.round_trips.sum()),
+        )
+        self._state_pub.put(encode(state))
+
+    def finish(self, reason: str) -> dict:
+        result = {
+            "reason": reason,
+            "metrics": self.world.metrics.summary(),
+            "transport": self.stats.summary(),
+            "rejected": dict(self.errors.counts),
+            "dead_robots": np.flatnonzero(~self.world.alive).tolist(),
+        }
+        self._end_pub.put(encode(RunEnd(tick=self.world.tick, reason=reason, metrics=_plain(result))))
+        return result
+
+    def close(self) -> None:
+        for d in self._decls:
+            try:
+                d.undeclare()
+            except Exception:  # already gone with the session
+                pass
+
+
+def _plain(value):
+    """JSON/msgpack-friendly copy (no None inside lists is fine; tuples to lists)."""
+    if isinstance(value, dict):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    return value
