@@ -1,0 +1,189 @@
+"""Integration: real router, world-server and agent processes over real Zenoh sessions.
+
+Each test gets its own router on a free loopback port (read back from the router, never fixed),
+its own run name (key prefix), no multicast; readiness is awaited on the router's announcement and
+on the world's state stream, never by sleeping; every process started is stopped by id in the test.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import uuid
+
+import pytest
+
+from swarmloc.deploy.batch import run_batch
+from swarmloc.deploy.launch import start_router, supervised
+from swarmloc.deploy.scenario import load_scenario
+from swarmloc.protocol.keys import Keys
+from swarmloc.protocol.messages import EpuckAct, WorldState, decode, encode
+from swarmloc.protocol.session import open_session, session_config
+
+pytestmark = pytest.mark.integration
+
+
+def _scenario(tmp_path, overrides):
+    scenario = load_scenario("ES1", overrides)
+    path = tmp_path / "scenario.json"
+    path.write_text(json.dumps(scenario.to_dict()))
+    return scenario, path
+
+
+class Swarm:
+    """A router, a world-server and agents, started for one test."""
+
+    def __init__(self, sup, tmp_path, scenario_path, robots: int, realtime: bool = False):
+        self.sup = sup
+        self.run = "t" + uuid.uuid4().hex[:10]
+        self.keys = Keys(self.run)
+        _, self.endpoint = start_router(sup)
+        self.out = tmp_path / "out"
+        transport = ["-m", "client", "-e", self.endpoint, "--run", self.run]
+        args = ["world", str(scenario_path), *transport, "--out", str(self.out), "--join-timeout-s", "60"]
+        if realtime:
+            args.append("--realtime")
+        self.world = sup.start(args, log_path=tmp_path / "world.log")
+        self.agents = [
+            sup.start(["agent", "--robot", str(i), *transport], log_path=tmp_path / f"agent{i}.log")
+            for i in range(robots)
+        ]
+
+    def results(self, timeout_s: float = 120.0) -> dict:
+        code = self.world.wait(timeout=timeout_s)
+        assert code == 0, f"world exited {code}"
+        return json.loads((self.out / "results.json").read_text())
+
+
+def _client(endpoint):
+    return open_session(session_config(mode="client", connect=[endpoint]))
+
+
+def test_process_run_matches_batch_engine(tmp_path):
+    scenario, path = _scenario(tmp_path, ["world.robots=4", "world.duration_s=40.0", "world.seed=7"])
+    with supervised() as sup:
+        swarm = Swarm(sup, tmp_path, path, robots=4)
+        result = swarm.results()
+        agent_codes = [a.wait(timeout=30) for a in swarm.agents]
+    assert agent_codes == [0, 0, 0, 0], "agents end cleanly when the run ends"
+    batch = run_batch(scenario)
+    assert result["reason"] == "completed"
+    assert result["transport"]["ticks"] == 400
+    assert result["metrics"] == json.loads(json.dumps(batch.metrics))
+    assert result["rejected"] == {}
+
+
+def test_killed_agent_stands_still_and_run_goes_on(tmp_path):
+    _, path = _scenario(tmp_path, ["world.robots=4", "world.duration_s=120.0"])
+    states: list[WorldState] = []
+    got_state = threading.Event()
+    killed_seen = threading.Event()
+    with supervised() as sup:
+        swarm = Swarm(sup, tmp_path, path, robots=4)
+        with _client(swarm.endpoint) as session:
+
+            def on_state(sample):
+                s = decode(sample.payload.to_bytes(), WorldState)
+                states.append(s)
+                got_state.set()
+                if not s.alive[2]:
+                    killed_seen.set()
+
+            session.declare_subscriber(swarm.keys.world_state, on_state)
+            assert got_state.wait(60), "the run never started"
+            os.kill(swarm.agents[2].pid, signal.SIGKILL)
+            assert killed_seen.wait(30), "the world never noticed the dead agent"
+            result = swarm.results()
+    assert result["reason"] == "completed"
+    assert result["dead_robots"] == [2]
+    after = [s for s in states if not s.alive[2]]
+    assert len(after) >= 2
+    # Standing still: robot 2's pose does not change once its agent is gone (other robots may
+    # push it, so allow only what a collision can do: well under a body diameter overall).
+    first, last = after[0].poses[2], after[-1].poses[2]
+    assert abs(last[2] - first[2]) < 1e-12, "a dead robot does not turn"
+    moving = [abs(after[-1].poses[i][0] - after[0].poses[i][0]) + abs(after[-1].poses[i][1] - after[0].poses[i][1]) for i in (0, 1, 3)]
+    assert max(moving) > 0.05, "the other robots kept moving"
+    for a in swarm.agents:
+        assert a.poll() is not None
+
+
+def test_bad_messages_are_rejected_counted_and_change_nothing(tmp_path):
+    scenario, path = _scenario(tmp_path, ["world.robots=3", "world.duration_s=60.0", "world.seed=3"])
+    got_state = threading.Event()
+    with supervised() as sup:
+        swarm = Swarm(sup, tmp_path, path, robots=3)
+        with _client(swarm.endpoint) as session:
+            session.declare_subscriber(swarm.keys.world_state, lambda s: got_state.set())
+            assert got_state.wait(60), "the run never started"
+            k = swarm.keys
+            good = EpuckAct(tick=10**9, robot_id=1, wheel_speed_steps_s=(0.0, 0.0), payload=None,
+                            state=0, pose_estimate=(0.0, 0.0, 0.0))
+            bad = {
+                k.act(1): [b"\x00garbage", b"\x81\xa1v\x01", b"x" * (300 * 1024),  # junk, not ours, oversized
+                           encode(good).replace(b"\xcb", b"\xc0", 1)],  # truncated/type-confused
+                k.act(2): [encode(good)],  # robot 1's act on robot 2's key
+                k.sense(0): [b"\xc1", encode(good)],  # junk and a wrong type to an agent
+            }
+            # Out of range: a wheel speed beyond the e-puck's 1000 steps/s (built by hand).
+            import msgpack
+
+            raw = {"v": 1, "t": "act", "tick": 5, "robot_id": 1, "wheel_speed_steps_s": [5000.0, 0.0],
+                   "payload": None, "state": 0, "pose_estimate": [0.0, 0.0, 0.0]}
+            bad[k.act(1)].append(msgpack.packb(raw))
+            for key, payloads in bad.items():
+                for payload in payloads:
+                    session.put(key, payload)
+            result = swarm.results()
+    batch = run_batch(scenario)
+    assert result["reason"] == "completed"
+    assert result["metrics"] == json.loads(json.dumps(batch.metrics)), "bad input changed the run"
+    assert result["rejected"].get("act", 0) >= 5
+    agent0_log = (tmp_path / "agent0.log").read_text()
+    assert "rejected sense" in agent0_log
+
+
+def test_realtime_mode_holds_ten_hertz(tmp_path):
+    _, path = _scenario(tmp_path, ["world.robots=5", "world.duration_s=5.0"])
+    with supervised() as sup:
+        swarm = Swarm(sup, tmp_path, path, robots=5, realtime=True)
+        result = swarm.results()
+    t = result["transport"]
+    assert t["ticks"] == 50
+    assert 9.0 <= t["ticks_per_s"] <= 10.5
+    assert t["overruns"] <= 2
+
+
+def test_swarmloc_run_command_end_to_end(tmp_path):
+    out = tmp_path / "runs"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "swarmloc", "run", "--robots", "3", "--duration-s", "20", "--out", str(out),
+         "--run", "e2e", "--quiet"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+    )
+    try:
+        stdout, stderr = proc.communicate(timeout=180)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    assert proc.returncode == 0, stderr
+    assert "round trips" in stdout
+    result = json.loads((out / "e2e" / "results.json").read_text())
+    assert result["transport"]["ticks"] == 200
+    saved = json.loads((out / "e2e" / "scenario.json").read_text())
+    assert saved["world"]["robots"] == 3 and result["seed"] == saved["world"]["seed"]
+
+
+def test_bad_option_stops_before_anything_starts(tmp_path):
+    proc = subprocess.run(
+        [sys.executable, "-m", "swarmloc", "run", "--set", "world.robts=3", "--out", str(tmp_path)],
+        capture_output=True, text=True, timeout=60,
+    )
+    assert proc.returncode == 2
+    assert "world.robts" in proc.stderr and "robots" in proc.stderr
+    assert not any(tmp_path.iterdir()), "no run folder for a refused run"
