@@ -270,8 +270,13 @@ def _rank_within(group: np.ndarray) -> np.ndarray:
     n = group.shape[0]
     if n == 0:
         return np.zeros(0, np.int64)
-    starts = np.flatnonzero(np.r_[True, group[1:] != group[:-1]])
-    run_start = np.repeat(starts, np.diff(np.r_[starts, n]))
+    if n == 1:
+        return np.zeros(1, np.int64)
+    new_run = np.empty(n, bool)
+    new_run[0] = True
+    np.not_equal(group[1:], group[:-1], out=new_run[1:])
+    starts = np.flatnonzero(new_run)
+    run_start = np.repeat(starts, np.diff(np.append(starts, n)))
     return np.arange(n) - run_start
 
 

@@ -157,7 +157,7 @@ class AgentNode:
     def declare(self) -> None:
         s, k = self.session, self.keys
         self._act_pub = s.declare_publisher(
-            k.act(self.robot_id), congestion_control=zenoh.CongestionControl.BLOCK, express=True
+            k.act(self.robot_id), congestion_control=zenoh.CongestionControl.BLOCK
         )
         self._decls.append(s.declare_subscriber(k.run_end, self._on_end))
         self._decls.append(s.declare_subscriber(k.sense(self.robot_id), self._on_sense))

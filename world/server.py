@@ -99,6 +99,7 @@ class WorldServer:
         self._live = np.zeros(n, bool)  # liveliness tokens present
         self._joined = np.zeros(n, bool)
         self._current_tick = -1
+        self._awaited = 0
         self._got = np.zeros(n, bool)
         self._cmd = np.zeros((n, 2))
         self._sending = np.zeros(n, bool)
@@ -169,7 +170,9 @@ class WorldServer:
             self._sending[robot] = act.payload is not None
             self._payloads[robot] = act.payload
             self._state[robot] = act.state
-            self._cond.notify_all()
+            self._awaited -= 1
+            if self._awaited <= 0:  # wake the loop once, when the last awaited act is in
+                self._cond.notify_all()
 
     # -- the loop ----------------------------------------------------------------------------
 
@@ -179,7 +182,7 @@ class WorldServer:
         self._decls.append(s.declare_subscriber(k.act_all, self._on_act))
         self._decls.append(s.liveliness().declare_subscriber(k.alive_all, self._on_alive, history=True))
         self._sense_pub = [
-            s.declare_publisher(k.sense(i), congestion_control=zenoh.CongestionControl.BLOCK, express=True)
+            s.declare_publisher(k.sense(i), congestion_control=zenoh.CongestionControl.BLOCK)
             for i in range(self.world.n_robots)
         ]
         self._state_pub = s.declare_publisher(k.world_state)
@@ -260,6 +263,7 @@ class WorldServer:
                 # Messages sent at the previous tick are delivered now; take them before this
                 # tick's acts (which may arrive as soon as the first Sense is out) replace them.
                 outgoing, self._payloads = self._payloads, [None] * n
+                self._awaited = int((world.alive & self._live).sum())
             obs = world.observe()
             self._senses(obs, outgoing)
             started = time.monotonic()
