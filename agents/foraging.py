@@ -167,7 +167,7 @@ class SocialMessages:
     heard_bearing_rad: np.ndarray
 
     @classmethod
-    def empty(cls, m: int, capacity: int) -> "SocialMessages":
+    def empty(cls, m: int, capacity: int) -> SocialMessages:
         return cls(
             np.zeros((m, 2), bool),
             np.zeros((m, 2)),
@@ -177,7 +177,7 @@ class SocialMessages:
             np.zeros((m, capacity)),
         )
 
-    def take(self, index: np.ndarray) -> "SocialMessages":
+    def take(self, index: np.ndarray) -> SocialMessages:
         return SocialMessages(*(getattr(self, f)[index] for f in self.__dataclass_fields__))
 
     def encode(self, row: int) -> bytes:
@@ -198,13 +198,13 @@ class SocialMessages:
         return msgpack.packb(body, use_single_float=True)
 
     @classmethod
-    def decode(cls, payloads: list[bytes], capacity: int) -> "SocialMessages":
+    def decode(cls, payloads: list[bytes], capacity: int) -> SocialMessages:
         """Decode payloads; raise ``ValueError`` naming what is wrong in the first bad one."""
         out = cls.empty(len(payloads), capacity)
         for m, payload in enumerate(payloads):
             try:
                 body = msgpack.unpackb(payload, max_array_len=16, max_bin_len=0, max_str_len=0)
-            except Exception as exc:  # msgpack raises several unrelated types
+            except Exception as exc:  # noqa: BLE001 -- msgpack raises many unrelated types
                 raise ValueError(f"payload: not a social odometry message ({exc})") from None
             if not isinstance(body, list) or len(body) != 8:
                 raise ValueError("payload: expected a list of 8 items")
@@ -251,7 +251,7 @@ class Inbox:
     content: SocialMessages
 
     @classmethod
-    def empty(cls, capacity: int) -> "Inbox":
+    def empty(cls, capacity: int) -> Inbox:
         z = np.zeros(0)
         return cls(np.zeros(0, np.int64), np.zeros(0, np.int64), z, z, SocialMessages.empty(0, capacity))
 
@@ -322,7 +322,7 @@ class ForagingBrain:
         self.tick = 0
         self.partner_ids = np.full((n, config.encounter_memory), -1, np.int64)
         self.partner_until = np.zeros((n, config.encounter_memory), np.int64)
-        self._gap_ticks = int(round(config.encounter_gap_s / tick_s))
+        self._gap_ticks = round(config.encounter_gap_s / tick_s)
         self._fuse = fuse(self.strategy, config.beta) if self.strategy.communicates else None
         spin_rad_s = 2.0 * config.turn_speed_steps_s * body.metres_per_step / body.wheelbase_m
         self._spin_rad_per_tick = spin_rad_s * tick_s
@@ -488,9 +488,9 @@ class ForagingBrain:
         lo, hi = self.config.wander_straight_s
         for i in np.flatnonzero(need):
             angle, straight_s = self.rngs[i].uniform((-math.pi, lo), (math.pi, hi))
-            self.turn_ticks[i] = int(round(abs(angle) / self._spin_rad_per_tick))
+            self.turn_ticks[i] = round(abs(angle) / self._spin_rad_per_tick)
             self.turn_dir[i] = 1.0 if angle >= 0 else -1.0
-            self.straight_ticks[i] = int(round(straight_s / self.tick_s))
+            self.straight_ticks[i] = round(straight_s / self.tick_s)
 
     def _motors(self, ir: np.ndarray) -> np.ndarray:
         cfg = self.config

@@ -20,8 +20,8 @@ All functions are pure and work on arrays with a leading message axis.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 

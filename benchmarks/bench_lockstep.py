@@ -31,7 +31,7 @@ def main() -> int:
                    "--duration-s", str(args.duration_s), "--out", tmp, "--run", run, "--quiet"]
             if args.realtime:
                 cmd.append("--realtime")
-            proc = subprocess.run(cmd, capture_output=True, text=True)
+            proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
             if proc.returncode != 0:
                 print(f"{n:>6} failed: {proc.stderr.strip()[-300:]}")
                 continue

@@ -13,6 +13,7 @@ import math
 import time
 
 import numpy as np
+
 from swarmloc.protocol.epuck import EpuckBody
 from swarmloc.world.arena import Arena, Disc, area_at, resolve_collisions
 from swarmloc.world.medium import RabMedium, deliver

@@ -26,14 +26,19 @@ from swarmloc.config import ConfigError
 
 log = logging.getLogger("swarmloc")
 
+DEFAULT_SCENARIO = "ES1"
+#: Simulated seconds of the default ``swarmloc run`` (ES1 itself lasts 1800 s).
+DEFAULT_RUN_DURATION_S = 600.0
+
 
 # -- shared option groups ---------------------------------------------------------------------
 
 
 def _scenario_args(p: argparse.ArgumentParser, positional: bool = True) -> None:
     if positional:
-        p.add_argument("scenario", nargs="?", default="ES1",
-                       help="shipped scenario name (see `swarmloc scenarios`) or a .toml/.json file; default ES1")
+        p.add_argument("scenario", nargs="?", default=None,
+                       help="shipped scenario name (see `swarmloc scenarios`) or a .toml/.json file; "
+                            "default ES1 (for `swarmloc run`: ES1 shortened to 600 s)")
     g = p.add_argument_group("scenario overrides")
     g.add_argument("--robots", type=int, help="number of robots")
     g.add_argument("--strategy", help="NC, SSGIKF, DSGIKF, SSGIFF or DSGIFF")
@@ -51,6 +56,11 @@ def load_from_args(args):
     from swarmloc.deploy.scenario import Scenario, load_scenario
 
     overrides = list(args.set)
+    if args.scenario is None:
+        args.scenario = DEFAULT_SCENARIO
+        if getattr(args, "command", None) == "run" and args.duration_s is None:
+            # The default demo finishes in about a minute on two cores; the full ES1 is 1800 s.
+            overrides.insert(0, f"world.duration_s={DEFAULT_RUN_DURATION_S}")
     for flag, key in (("robots", "world.robots"), ("strategy", "agent.strategy"), ("beta", "agent.beta"),
                       ("seed", "world.seed"), ("duration_s", "world.duration_s")):
         value = getattr(args, flag, None)
@@ -198,7 +208,7 @@ def _print_metrics(summary: dict) -> None:
     recruit = m.get("recruitment_time_s")
     print(f"scenario {summary['scenario']}  strategy {summary['strategy']}  seed {summary['seed']}  robots {n}")
     print(f"  robots that found both areas : {m['robots_found_both']}/{n}")
-    print(f"  recruitment time (all robots): {'%.1f s' % recruit if recruit is not None else 'not reached'}")
+    print(f"  recruitment time (all robots): {f'{recruit:.1f} s' if recruit is not None else 'not reached'}")
     print(f"  round trips nest-prey-nest   : {m['round_trips_total']}")
     frac = m.get("on_path_fraction_mean")
     print(f"  robots on the path (2nd half): {'%.0f %%' % (100 * frac) if frac is not None else '-'}")

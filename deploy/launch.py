@@ -30,7 +30,8 @@ class Supervisor:
     def start(self, args: list[str], *, log_path: Path | None = None, stdout=None) -> subprocess.Popen:
         out = stdout
         if out is None:
-            out = open(log_path, "ab") if log_path else subprocess.DEVNULL
+            # The child inherits the descriptor; ours is closed right after the start.
+            out = open(log_path, "ab") if log_path else subprocess.DEVNULL  # noqa: SIM115
         proc = subprocess.Popen(
             PYTHON + args,
             stdout=out,

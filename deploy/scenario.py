@@ -32,10 +32,10 @@ class Scenario:
         return to_dict(self)
 
     @classmethod
-    def from_dict(cls, data: dict) -> "Scenario":
+    def from_dict(cls, data: dict) -> Scenario:
         return from_dict(cls, data)
 
-    def replace(self, **world_changes) -> "Scenario":
+    def replace(self, **world_changes) -> Scenario:
         return dataclasses.replace(self, world=dataclasses.replace(self.world, **world_changes))
 
 

@@ -48,6 +48,7 @@ from numbers import Integral, Real
 from typing import Any
 
 import msgpack
+
 from swarmloc.protocol.epuck import EpuckBody
 
 PROTOCOL_VERSION = 1

@@ -182,7 +182,7 @@ def test_swarmloc_run_command_end_to_end(tmp_path):
 def test_bad_option_stops_before_anything_starts(tmp_path):
     proc = subprocess.run(
         [sys.executable, "-m", "swarmloc", "run", "--set", "world.robts=3", "--out", str(tmp_path)],
-        capture_output=True, text=True, timeout=60,
+        capture_output=True, text=True, timeout=60, check=False,
     )
     assert proc.returncode == 2
     assert "world.robts" in proc.stderr and "robots" in proc.stderr

@@ -15,6 +15,7 @@ import pytest
 import zenoh
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+
 from swarmloc.protocol import messages
 from swarmloc.protocol.keys import Keys, validate_run_name
 from swarmloc.protocol.messages import (

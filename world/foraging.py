@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from swarmloc.protocol.epuck import GROUND_SENSOR_OFFSETS_M, EpuckBody, integrate_pose
+from swarmloc.protocol.messages import MAX_RAB_PAYLOAD_BYTES, MAX_RECEIVED
 from swarmloc.world.arena import Arena, Disc, area_at, resolve_collisions
 from swarmloc.world.medium import Deliveries, RabMedium, deliver
 from swarmloc.world.metrics import ForagingMetrics
@@ -101,13 +102,17 @@ class WorldConfig:
             raise ValueError(f"duration_s: must be at least one tick, got {self.duration_s}")
         if not 0 <= self.seed < 2**63:
             raise ValueError(f"seed: must be in 0..2**63-1, got {self.seed}")
+        if self.medium.max_received_per_tick > MAX_RECEIVED:
+            raise ValueError(f"medium.max_received_per_tick: a Sense carries at most {MAX_RECEIVED} messages")
+        if self.medium.max_payload_bytes > MAX_RAB_PAYLOAD_BYTES:
+            raise ValueError(f"medium.max_payload_bytes: the protocol carries at most {MAX_RAB_PAYLOAD_BYTES} bytes")
         free = self.arena.width_m * self.arena.height_m
         if self.robots * np.pi * self.body.body_radius_m**2 > 0.5 * free:
             raise ValueError(f"robots: {self.robots} e-pucks do not fit in the arena")
 
     @property
     def n_ticks(self) -> int:
-        return int(round(self.duration_s / self.tick_s))
+        return round(self.duration_s / self.tick_s)
 
 
 @dataclass

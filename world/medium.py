@@ -30,6 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial import cKDTree
+
 from swarmloc.protocol.epuck import wrap_angle
 
 

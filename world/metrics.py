@@ -16,6 +16,7 @@ Vectorised over robots; no randomness.
 from __future__ import annotations
 
 import numpy as np
+
 from swarmloc.world.arena import AREA_NEST, AREA_PREY
 
 # Round-trip stage of each robot.

@@ -27,6 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial import cKDTree
+
 from swarmloc.protocol.epuck import GROUND_SENSOR_OFFSETS_M, IR_SENSOR_ANGLES_RAD
 from swarmloc.world.arena import AREA_NEST, AREA_NONE, AREA_PREY, Arena, ground_reflectance
 

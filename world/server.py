@@ -313,8 +313,8 @@ class WorldServer:
         for d in self._decls:
             try:
                 d.undeclare()
-            except Exception:  # already gone with the session
-                pass
+            except Exception as exc:  # noqa: BLE001 -- gone with the session already
+                log.debug("undeclare: %s", exc)
 
 
 def _plain(value):
