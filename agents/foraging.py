@@ -142,8 +142,9 @@ class AgentConfig:
             raise ValueError("search_overshoot_m, avoid_threshold and steering_gain must be positive")
         if self.encounter_gap_s < 0 or not 1 <= self.encounter_memory <= 16:
             raise ValueError("encounter_gap_s must be >= 0 and encounter_memory in 1..16")
-        if not 0 <= self.heard_capacity <= 4:
-            raise ValueError(f"heard_capacity: must be in 0..4, got {self.heard_capacity}")
+        # 3 is the most that fits the board's 64-byte payload with any robot id.
+        if not 0 <= self.heard_capacity <= 3:
+            raise ValueError(f"heard_capacity: must be in 0..3, got {self.heard_capacity}")
 
 
 # --------------------------------------------------------------------------------------------

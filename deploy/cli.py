@@ -128,7 +128,7 @@ def main_router(args) -> int:
 
 def main_world(args) -> int:
     from swarmloc.protocol.keys import Keys
-    from swarmloc.protocol.session import config_from_args, open_session
+    from swarmloc.protocol.session import bound_endpoints, config_from_args, open_session
     from swarmloc.world.foraging import ForagingWorld
     from swarmloc.world.server import WorldServer
 
@@ -144,6 +144,8 @@ def main_world(args) -> int:
                              realtime=args.realtime, act_timeout_s=args.act_timeout_s,
                              join_timeout_s=args.join_timeout_s)
         server.declare()
+        if args.announce:
+            print(json.dumps({"endpoints": bound_endpoints(session)}), flush=True)
         watcher = threading.Thread(target=lambda: (stop.wait(), server.stop()), daemon=True)
         watcher.start()
         try:
@@ -236,6 +238,8 @@ def build_parser() -> argparse.ArgumentParser:
     _run_name(p)
     _transport(p)
     p.add_argument("--out", default=None, help="folder for scenario.json and results.json")
+    p.add_argument("--announce", action="store_true",
+                   help="print the endpoints this world listens on as one JSON line once it serves")
     p.add_argument("--realtime", action="store_true")
     p.add_argument("--act-timeout-s", type=float, default=10.0)
     p.add_argument("--join-timeout-s", type=float, default=180.0)

@@ -14,7 +14,7 @@ import threading
 import time
 from pathlib import Path
 
-from swarmloc.deploy.launch import start_router, supervised
+from swarmloc.deploy.launch import start_announcing, start_router, supervised
 from swarmloc.deploy.scenario import Scenario
 
 
@@ -79,15 +79,18 @@ def run_local(scenario: Scenario, *, run_name: str | None, out_root: Path, realt
         _, endpoint = start_router(sup)
         say(f"router on {endpoint}; run '{run}': {w.robots} robots, {scenario.agent.strategy}, "
             f"seed {w.seed}, {w.duration_s:.0f} s simulated ({'real time' if realtime else 'lockstep'})")
-        transport = ["-m", "client", "-e", endpoint, "--run", run]
-        world_args = ["world", str(scenario_file), *transport, "--out", str(out),
+        # The world's own session is a router that the agents reach directly (one hop less for
+        # each of the 2N lockstep messages of a tick); it links to the standalone router, where
+        # observers and pieces on other hosts connect.
+        world_args = ["world", str(scenario_file), "-m", "router", "-l", "tcp/127.0.0.1:0",
+                      "-e", endpoint, "--run", run, "--out", str(out), "--announce",
                       "--join-timeout-s", str(join_timeout_s)]
         if realtime:
             world_args.append("--realtime")
-        world = sup.start(world_args, log_path=log_dir / "world.log")
+        world, world_endpoint = start_announcing(sup, world_args, log_path=log_dir / "world.log")
         for i in range(w.robots):
-            sup.start(["agent", "--robot", str(i), *transport, "--join-timeout-s", str(join_timeout_s)],
-                      log_path=log_dir / f"agent-{i}.log")
+            sup.start(["agent", "--robot", str(i), "-m", "client", "-e", world_endpoint, "--run", run,
+                       "--join-timeout-s", str(join_timeout_s)], log_path=log_dir / f"agent-{i}.log")
         stop_progress = _progress_follower(endpoint, run, w.n_ticks, quiet)
         try:
             code = world.wait()

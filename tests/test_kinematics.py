@@ -14,6 +14,7 @@ import math
 
 import numpy as np
 import pytest
+
 from swarmloc.protocol.epuck import (
     EpuckBody,
     displacement,
@@ -214,8 +215,13 @@ def test_one_straight_step_from_zero_covariance_is_w_q_wt():
     assert expected[2, 2] == pytest.approx(2.5e-4 / 0.053**2)
 
     p = propagate_covariance(
-        np.zeros((1, 3, 3)), _one(0.0, 0.0, 0.0), _arr(0.01), _arr(0.01), WHEELBASE_M,
-        k_right_m=0.02, k_left_m=0.005,
+        np.zeros((1, 3, 3)),
+        _one(0.0, 0.0, 0.0),
+        _arr(0.01),
+        _arr(0.01),
+        WHEELBASE_M,
+        k_right_m=0.02,
+        k_left_m=0.005,
     )
     np.testing.assert_allclose(p[0], expected, rtol=1e-12, atol=1e-18)
 
@@ -223,8 +229,13 @@ def test_one_straight_step_from_zero_covariance_is_w_q_wt():
 def test_right_and_left_error_constants_are_not_swapped():
     # Only the right wheel is noisy: the y-theta correlation sign is that of the right column.
     p = propagate_covariance(
-        np.zeros((1, 3, 3)), _one(0.0, 0.0, 0.0), _arr(0.01), _arr(0.01), WHEELBASE_M,
-        k_right_m=0.01, k_left_m=0.0,
+        np.zeros((1, 3, 3)),
+        _one(0.0, 0.0, 0.0),
+        _arr(0.01),
+        _arr(0.01),
+        WHEELBASE_M,
+        k_right_m=0.01,
+        k_left_m=0.0,
     )
     q_r = 0.01 * 0.01
     # right column of W at zeta = 0: (0.5, d_rho/(2b), 1/b)
@@ -246,8 +257,13 @@ def test_general_step_matches_eq_9_to_11_written_out(theta_rad, du_left_m, du_ri
     q = np.diag([k_r_m * abs(du_right_m), k_l_m * abs(du_left_m)])
     expected = a @ p0 @ a.T + w @ q @ w.T
     out = propagate_covariance(
-        p0[None], _one(0.1, 0.2, theta_rad), _arr(du_left_m), _arr(du_right_m), WHEELBASE_M,
-        k_right_m=k_r_m, k_left_m=k_l_m,
+        p0[None],
+        _one(0.1, 0.2, theta_rad),
+        _arr(du_left_m),
+        _arr(du_right_m),
+        WHEELBASE_M,
+        k_right_m=k_r_m,
+        k_left_m=k_l_m,
     )
     np.testing.assert_allclose(out[0], expected, rtol=1e-10, atol=1e-16)
 
@@ -287,13 +303,23 @@ def test_eq_11_jacobians_are_derivatives_of_eq_7():
         )
         np.testing.assert_allclose(out[0], np.outer(a_num[:, i], a_num[:, i]), atol=1e-7)
     out_r = propagate_covariance(
-        np.zeros((1, 3, 3)), _one(x, y, th), _arr(du_l), _arr(du_r), WHEELBASE_M,
-        k_right_m=1.0 / du_r, k_left_m=0.0,
+        np.zeros((1, 3, 3)),
+        _one(x, y, th),
+        _arr(du_l),
+        _arr(du_r),
+        WHEELBASE_M,
+        k_right_m=1.0 / du_r,
+        k_left_m=0.0,
     )
     np.testing.assert_allclose(out_r[0], np.outer(w_num[:, 0], w_num[:, 0]), rtol=1e-6, atol=1e-7)
     out_l = propagate_covariance(
-        np.zeros((1, 3, 3)), _one(x, y, th), _arr(du_l), _arr(du_r), WHEELBASE_M,
-        k_right_m=0.0, k_left_m=1.0 / du_l,
+        np.zeros((1, 3, 3)),
+        _one(x, y, th),
+        _arr(du_l),
+        _arr(du_r),
+        WHEELBASE_M,
+        k_right_m=0.0,
+        k_left_m=1.0 / du_l,
     )
     np.testing.assert_allclose(out_l[0], np.outer(w_num[:, 1], w_num[:, 1]), rtol=1e-6, atol=1e-7)
 

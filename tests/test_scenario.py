@@ -1,0 +1,335 @@
+"""Scenarios, strict configuration loading, the CLI's refusals, and batch-run determinism.
+
+Shipped values come from seed 000 table 2 (ES1-ES3) and seed 001 §4.1 (SO-*), written out here.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from swarmloc.config import ConfigError, apply_overrides, from_dict, parse_value
+from swarmloc.deploy.batch import run_batch
+from swarmloc.deploy.cli import main
+from swarmloc.deploy.scenario import Scenario, builtin_names, load_scenario
+from swarmloc.world.foraging import WorldConfig
+
+SO_NAMES = ["SO-3.0x3.0", "SO-3.5x3.5", "SO-4.0x4.0", "SO-4.5x4.5"]
+
+
+# ---------------------------------------------------------------------------------------------
+# Shipped scenarios
+# ---------------------------------------------------------------------------------------------
+
+
+def test_shipped_scenario_names():
+    assert builtin_names() == sorted(["ES1", "ES2", "ES3"] + SO_NAMES)
+
+
+@pytest.mark.parametrize("name", ["ES1", "ES2", "ES3"] + SO_NAMES)
+def test_every_shipped_scenario_loads(name):
+    s = load_scenario(name)
+    assert isinstance(s, Scenario)
+    assert s.name == name
+    assert s.description
+
+
+# Seed 000 table 2: area (m), initial radius (m), nest/prey radius (m), robots, duration (s).
+TABLE_2 = {
+    "ES1": ((1.2, 1.7), 0.2, 0.1, 10, 1800.0),
+    "ES2": ((3.0, 4.25), 0.5, 0.1, 50, 7200.0),
+    "ES3": ((6.0, 8.5), 0.5, 0.1, 100, 7200.0),
+}
+
+
+@pytest.mark.parametrize("name", sorted(TABLE_2))
+def test_es_scenarios_match_table_2_of_seed_000(name):
+    (width_m, height_m), initial_m, area_radius_m, robots, duration_s = TABLE_2[name]
+    w = load_scenario(name).world
+    assert (w.arena.width_m, w.arena.height_m) == (width_m, height_m)
+    assert w.arena.initial_radius_m == initial_m
+    assert w.arena.nest_radius_m == area_radius_m
+    assert w.arena.prey_radius_m == area_radius_m
+    assert w.robots == robots
+    assert w.duration_s == duration_s
+    assert w.medium.range_m == 0.15  # seed 000 §6.1: 15 cm range-and-bearing
+    assert w.tick_s == 0.1  # 10 Hz controller clock (seed 000 §5)
+
+
+@pytest.mark.parametrize("name", SO_NAMES)
+def test_so_scenarios_match_seed_001(name):
+    s = load_scenario(name)
+    side_m = float(name.split("-")[1].split("x")[0])
+    assert (s.world.arena.width_m, s.world.arena.height_m) == (side_m, side_m)
+    assert s.world.robots == 30
+    assert s.world.duration_s == 3600.0
+    assert s.world.medium.range_m == 0.25
+
+
+def test_areas_lie_inside_their_arena_for_every_shipped_scenario():
+    for name in builtin_names():
+        a = load_scenario(name).world.arena
+        for (cx, cy), r in ((a.nest_centre_m, a.nest_radius_m), (a.prey_centre_m, a.prey_radius_m)):
+            assert r <= cx <= a.width_m - r
+            assert r <= cy <= a.height_m - r
+
+
+# ---------------------------------------------------------------------------------------------
+# Strict loading: unknown keys, wrong types, impossible values
+# ---------------------------------------------------------------------------------------------
+
+
+def test_unknown_key_names_the_path_and_suggests_the_closest():
+    with pytest.raises(ConfigError) as err:
+        load_scenario("ES1", ["world.robts=3"])
+    msg = str(err.value)
+    assert "world.robts" in msg
+    assert "'robots'" in msg
+
+
+def test_unknown_nested_key_names_the_full_path():
+    with pytest.raises(ConfigError) as err:
+        load_scenario("ES1", ["world.medium.rnage_m=0.2"])
+    assert "world.medium.rnage_m" in str(err.value)
+    assert "'range_m'" in str(err.value)
+
+
+def test_unknown_top_level_section():
+    with pytest.raises(ConfigError, match="'wrold'"):
+        load_scenario("ES1", ["wrold.robots=3"])
+
+
+@pytest.mark.parametrize("override", ['world.robots="ten"', "world.robots=ten"])
+def test_wrong_type_names_the_field(override):
+    with pytest.raises(ConfigError, match=r"world\.robots"):
+        load_scenario("ES1", [override])
+
+
+@pytest.mark.parametrize(
+    "override, path",
+    [
+        ("world.duration_s=true", r"world\.duration_s"),  # a bool is not a number
+        ("world.robots=3.5", r"world\.robots"),  # a float is not an int
+        ("agent.strategy=5", r"agent\.strategy"),
+        ("world.arena.nest_centre_m=[0.5]", r"world\.arena\.nest_centre_m"),
+        ("world.medium=3", r"world\.medium"),
+    ],
+)
+def test_more_wrong_types_name_the_field(override, path):
+    with pytest.raises(ConfigError, match=path):
+        load_scenario("ES1", [override])
+
+
+@pytest.mark.parametrize(
+    "override, field",
+    [
+        ("world.duration_s=-1.0", "duration_s"),
+        ("world.odometry.slip_fraction=1.5", "slip_fraction"),
+        ("world.arena.nest_centre_m=[5.0, 0.255]", "nest"),
+        ("world.robots=1000", "robots"),  # 1000 e-pucks cover 3.85 m^2 of a 2.04 m^2 arena
+        ("world.robots=0", "robots"),
+        ("world.tick_s=0.0", "tick_s"),
+        ("world.medium.loss_far=1.5", "loss_far"),
+        ("agent.strategy='SSGKIF'", "SSGIKF"),
+        ("agent.cruise_speed_steps_s=-10.0", "cruise_speed_steps_s"),
+    ],
+)
+def test_impossible_values_are_refused_naming_the_field(override, field):
+    with pytest.raises(ConfigError) as err:
+        load_scenario("ES1", [override])
+    assert field in str(err.value)
+
+
+def test_wrong_type_error_is_a_value_error_subclass():
+    # Callers that catch ValueError (the CLI) also catch configuration errors.
+    assert issubclass(ConfigError, ValueError)
+
+
+def test_from_dict_accepts_int_for_float_and_keeps_defaults():
+    w = from_dict(WorldConfig, {"duration_s": 60, "robots": 4})
+    assert w.duration_s == 60.0 and isinstance(w.duration_s, float)
+    assert w.robots == 4
+    assert w.tick_s == 0.1
+
+
+# ---------------------------------------------------------------------------------------------
+# Overrides
+# ---------------------------------------------------------------------------------------------
+
+
+def test_apply_overrides_parses_values_like_toml():
+    data = {"world": {"robots": 10}}
+    out = apply_overrides(
+        data,
+        [
+            "world.robots=3",
+            "world.duration_s=0.5",
+            "world.flag=true",
+            "agent.strategy=NC",
+            'agent.name="quoted"',
+            "world.arena.nest_centre_m=[1, 2.5]",
+        ],
+    )
+    assert out["world"]["robots"] == 3 and type(out["world"]["robots"]) is int
+    assert out["world"]["duration_s"] == 0.5 and type(out["world"]["duration_s"]) is float
+    assert out["world"]["flag"] is True
+    assert out["agent"]["strategy"] == "NC"
+    assert out["agent"]["name"] == "quoted"
+    assert out["world"]["arena"]["nest_centre_m"] == [1, 2.5]
+    assert data == {"world": {"robots": 10}}  # the input is not modified
+
+
+def test_parse_value_examples():
+    assert parse_value("3") == 3
+    assert parse_value("-2") == -2
+    assert parse_value("1e-3") == 0.001
+    assert parse_value("false") is False
+    assert parse_value("SSGIFF") == "SSGIFF"
+
+
+@pytest.mark.parametrize("bad", ["world.robots", "=3", "  =3"])
+def test_apply_overrides_refuses_malformed_items(bad):
+    with pytest.raises(ConfigError, match="KEY=VALUE"):
+        apply_overrides({}, [bad])
+
+
+def test_apply_overrides_refuses_a_value_used_as_a_table():
+    with pytest.raises(ConfigError, match="'robots' is not a table"):
+        apply_overrides({"world": {"robots": 10}}, ["world.robots.x=1"])
+
+
+def test_overrides_reach_the_loaded_scenario():
+    s = load_scenario(
+        "ES2", ["world.robots=7", "agent.strategy=DSGIFF", "agent.beta=0.001", "world.seed=42"]
+    )
+    assert s.world.robots == 7
+    assert s.agent.strategy == "DSGIFF"
+    assert s.agent.beta == 0.001
+    assert s.world.seed == 42
+    assert s.world.arena.width_m == 3.0  # the rest is ES2's
+
+
+# ---------------------------------------------------------------------------------------------
+# Files
+# ---------------------------------------------------------------------------------------------
+
+
+def test_scenario_from_a_toml_file(tmp_path):
+    path = tmp_path / "mine.toml"
+    path.write_text(
+        'name = "mine"\n[world]\nrobots = 4\nduration_s = 12.0\n[agent]\nstrategy = "NC"\n'
+    )
+    s = load_scenario(str(path))
+    assert (s.name, s.world.robots, s.world.duration_s, s.agent.strategy) == ("mine", 4, 12.0, "NC")
+
+
+def test_malformed_toml_names_the_file(tmp_path):
+    path = tmp_path / "broken.toml"
+    path.write_text("[world\nrobots = = 3\n")
+    with pytest.raises(ConfigError) as err:
+        load_scenario(str(path))
+    assert "broken.toml" in str(err.value)
+    assert "TOML" in str(err.value)
+
+
+def test_missing_file_names_the_file(tmp_path):
+    path = tmp_path / "absent.toml"
+    with pytest.raises(ConfigError) as err:
+        load_scenario(str(path))
+    assert "absent.toml" in str(err.value)
+
+
+def test_unknown_scenario_name_suggests_a_shipped_one():
+    with pytest.raises(ConfigError) as err:
+        load_scenario("ES4")
+    assert "ES4" in str(err.value)
+    assert "did you mean" in str(err.value)
+
+
+def test_bad_key_in_a_file_names_the_path(tmp_path):
+    path = tmp_path / "typo.toml"
+    path.write_text("[world]\nrobots = 4\n[world.arena]\nwidht_m = 2.0\n")
+    with pytest.raises(ConfigError, match=r"world\.arena\.widht_m.*'width_m'"):
+        load_scenario(str(path))
+
+
+# ---------------------------------------------------------------------------------------------
+# CLI refusals: exit code 2, a message naming the problem, nothing run
+# ---------------------------------------------------------------------------------------------
+
+
+@pytest.fixture
+def no_run(monkeypatch):
+    """Make any attempt to actually run a batch fail the test loudly."""
+    from swarmloc.deploy import batch
+
+    def boom(*args, **kwargs):
+        raise AssertionError("the CLI ran a batch despite a bad configuration")
+
+    monkeypatch.setattr(batch, "run_batch", boom)
+
+
+def test_cli_unknown_override_key_exits_2(capsys, no_run):
+    code = main(["batch", "ES1", "--set", "world.robts=3"])
+    captured = capsys.readouterr()
+    assert code == 2
+    assert "world.robts" in captured.err
+    assert "'robots'" in captured.err
+    assert captured.out == ""
+
+
+def test_cli_unknown_scenario_exits_2(capsys, no_run):
+    code = main(["batch", "nosuch"])
+    captured = capsys.readouterr()
+    assert code == 2
+    assert "nosuch" in captured.err
+    assert captured.out == ""
+
+
+def test_cli_impossible_robot_count_exits_2(capsys, no_run):
+    code = main(["batch", "ES1", "--robots", "1000"])
+    assert code == 2
+    assert "robots" in capsys.readouterr().err
+
+
+def test_cli_bad_strategy_exits_2_with_suggestion(capsys, no_run):
+    code = main(["batch", "ES1", "--strategy", "SSGKIF"])
+    assert code == 2
+    assert "SSGIKF" in capsys.readouterr().err
+
+
+# ---------------------------------------------------------------------------------------------
+# Determinism of the batch engine
+# ---------------------------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def es1_runs():
+    short = ["world.duration_s=30.0"]
+    a = run_batch(load_scenario("ES1", short + ["world.seed=5"]))
+    b = run_batch(load_scenario("ES1", short + ["world.seed=5"]))
+    c = run_batch(load_scenario("ES1", short + ["world.seed=6"]))
+    return a, b, c
+
+
+def test_same_seed_gives_identical_metrics_and_poses(es1_runs):
+    a, b, _ = es1_runs
+    assert a.metrics == b.metrics
+    np.testing.assert_array_equal(a.final_pose, b.final_pose)
+    np.testing.assert_array_equal(a.pose_estimate, b.pose_estimate)
+    np.testing.assert_array_equal(a.lost_count, b.lost_count)
+
+
+def test_different_seed_gives_different_final_poses(es1_runs):
+    a, _, c = es1_runs
+    assert not np.array_equal(a.final_pose, c.final_pose)
+    # 10 robots over 300 ticks of 0.1 s.
+    assert a.final_pose.shape == (10, 3)
+    assert len(a.metrics["on_path_series"]) == 30  # one sample per simulated second
+
+
+def test_batch_robots_stay_inside_the_arena(es1_runs):
+    a, _, _ = es1_runs
+    r = 0.035
+    assert (a.final_pose[:, 0] >= r - 1e-9).all() and (a.final_pose[:, 0] <= 1.2 - r + 1e-9).all()
+    assert (a.final_pose[:, 1] >= r - 1e-9).all() and (a.final_pose[:, 1] <= 1.7 - r + 1e-9).all()
