@@ -318,6 +318,7 @@ class ForagingBrain:
         self.heard_ids = np.full((n, k), -1, np.int64)
         self.heard_bearing_rad = np.zeros((n, k))
         self.heard_range_m = np.zeros((n, k))
+        self._heard_clear = True
         self.lost_count = np.zeros(n, np.int64)
         self.visit_ticks = np.zeros((n, 2), np.int64)
         self.tick = 0
@@ -325,6 +326,9 @@ class ForagingBrain:
         self.partner_until = np.zeros((n, config.encounter_memory), np.int64)
         self._gap_ticks = round(config.encounter_gap_s / tick_s)
         self._fuse = fuse(self.strategy, config.beta) if self.strategy.communicates else None
+        self._rows = np.arange(n)
+        self._silent = SocialMessages.empty(n, k)  # what a robot that never sends "sends"
+        self._sending = np.full(n, self.strategy.communicates)
         spin_rad_s = 2.0 * config.turn_speed_steps_s * body.metres_per_step / body.wheelbase_m
         self._spin_rad_per_tick = spin_rad_s * tick_s
 
@@ -344,6 +348,9 @@ class ForagingBrain:
         The stored location is the mean, over the visit, of where the robot believes its ground
         sensor was while it saw the area: a point inside the area, not the body centre beside it.
         """
+        if not (area >= 0).any():  # the common case: nobody stands on an area
+            self.visit_ticks.fill(0)
+            return
         sensor = self.pose[:, :2] + GROUND_SENSOR_M * np.stack(
             (np.cos(self.pose[:, 2]), np.sin(self.pose[:, 2])), axis=1
         )
@@ -365,6 +372,8 @@ class ForagingBrain:
             self.searching[arrived] = False
 
     def _lost(self, area: np.ndarray) -> None:
+        if not self.searching.any():
+            return
         lost = self.searching & (self.search_left_m <= 0.0) & (area != self.target)
         if lost.any():
             self.known[lost] = False
@@ -469,11 +478,15 @@ class ForagingBrain:
     def _remember_heard(self, inbox: Inbox) -> None:
         """Keep the nearest neighbours heard this tick: their ids, range and bearing (measured at
         the previous tick's poses, when the messages crossed)."""
+        k = self.config.heard_capacity
+        empty = inbox.receiver.shape[0] == 0 or k == 0
+        if empty and self._heard_clear:
+            return
         self.heard_ids.fill(-1)
         self.heard_bearing_rad.fill(0.0)
         self.heard_range_m.fill(0.0)
-        k = self.config.heard_capacity
-        if inbox.receiver.shape[0] == 0 or k == 0:
+        self._heard_clear = empty
+        if empty:
             return
         order = np.lexsort((inbox.sender_id, inbox.range_m, inbox.receiver))
         rec = inbox.receiver[order]
@@ -496,43 +509,48 @@ class ForagingBrain:
     def _motors(self, ir: np.ndarray) -> np.ndarray:
         cfg = self.config
         cruise, spin = cfg.cruise_speed_steps_s, cfg.turn_speed_steps_s
-        vmax = self.body.max_wheel_speed_steps_s
-        cmd = np.zeros((self.n, 2))
 
-        # forage: steer to the target's estimate
+        # forage: steer to the target's estimate (err stays 0 for robots without a target)
         going = self.target >= 0
-        err = np.zeros(self.n)
         if going.any():
-            g = self.goal_xy[np.arange(self.n), np.maximum(self.target, 0)]
+            g = self.goal_xy[self._rows, np.maximum(self.target, 0)]
             delta = g - self.pose[:, :2]
             dist = np.hypot(delta[:, 0], delta[:, 1])
             err = wrap_angle(np.arctan2(delta[:, 1], delta[:, 0]) - self.pose[:, 2])
             start = going & ~self.searching & (dist < cfg.arrival_tolerance_m)
-            self.searching[start] = True
-            self.search_left_m[start] = cfg.search_overshoot_m
-            err = np.where(self.searching, 0.0, err)
+            if start.any():
+                self.searching[start] = True
+                self.search_left_m[start] = cfg.search_overshoot_m
+            err[self.searching | ~going] = 0.0
+            in_place = going & (np.abs(err) > cfg.turn_in_place_rad)
+            spin_dir = np.sign(err)
+        else:
+            err = np.zeros(self.n)
+            in_place = np.zeros(self.n, bool)
+            spin_dir = err
         # wander: random walk
         wandering = ~going
-        need = wandering & (self.turn_ticks <= 0) & (self.straight_ticks <= 0)
-        if need.any():
-            self._wander_draws(need)
-        turning = wandering & (self.turn_ticks > 0)
-        straight = wandering & ~turning
-        self.turn_ticks[turning] -= 1
-        self.straight_ticks[straight] -= 1
+        if wandering.any():
+            need = wandering & (self.turn_ticks <= 0) & (self.straight_ticks <= 0)
+            if need.any():
+                self._wander_draws(need)
+            turning = wandering & (self.turn_ticks > 0)
+            self.turn_ticks[turning] -= 1
+            self.straight_ticks[wandering & ~turning] -= 1
+            if turning.any():
+                spin_dir = np.where(turning, self.turn_dir, spin_dir)
+                in_place = in_place | turning
 
-        spin_dir = np.where(turning, self.turn_dir, np.sign(err))
-        in_place = turning | (going & (np.abs(err) > cfg.turn_in_place_rad))
-        steer = np.clip(cfg.steering_gain * np.where(going, err, 0.0), -1.0, 1.0)
+        steer = np.clip(cfg.steering_gain * err, -1.0, 1.0)
+        cmd = np.empty((self.n, 2))
         cmd[:, 0] = cruise * (1.0 - steer)
         cmd[:, 1] = cruise * (1.0 + steer)
-        cmd[in_place, 0] = -spin * spin_dir[in_place]
-        cmd[in_place, 1] = spin * spin_dir[in_place]
-        del straight
+        if in_place.any():
+            cmd[in_place, 0] = -spin * spin_dir[in_place]
+            cmd[in_place, 1] = spin * spin_dir[in_place]
 
         # avoid: subsumes the layers below
-        strongest = ir.max(axis=1)
-        avoiding = strongest > cfg.avoid_threshold
+        avoiding = (ir > cfg.avoid_threshold).any(axis=1)
         if avoiding.any():
             vx = ir[avoiding] @ _COS_IR
             vy = ir[avoiding] @ _SIN_IR
@@ -543,9 +561,12 @@ class ForagingBrain:
             c[:, 0] = np.where(ahead, -spin * away, cruise)
             c[:, 1] = np.where(ahead, spin * away, cruise)
             cmd[avoiding] = c
-        return np.clip(cmd, -vmax, vmax)
+        vmax = self.body.max_wheel_speed_steps_s
+        return np.clip(cmd, -vmax, vmax, out=cmd)
 
     def _outgoing(self) -> SocialMessages:
+        if not self.strategy.communicates:
+            return self._silent
         # Goals in the body frame of the previous tick, the frame the heard bearings were measured
         # in: the receiver then combines measurements of one and the same crossing.
         frame = self.pose_history[1]
@@ -581,7 +602,7 @@ class ForagingBrain:
         cmd = self._motors(ir)
         return BrainOutput(
             wheel_speed_steps_s=cmd,
-            sending=np.full(self.n, self.strategy.communicates),
+            sending=self._sending,
             messages=self._outgoing(),
             state=self.state_codes(),
             pose_estimate=self.pose.copy(),

@@ -89,11 +89,12 @@ class AgentNode:
         self.last_sense_at = time.monotonic()
         self.ticks = 0
         self._capacity = brain.config.heard_capacity
+        self._no_mail = Inbox.empty(self._capacity)
         self._decls = []
 
     def _inbox(self, sense: EpuckSense) -> Inbox:
         if not sense.received:
-            return Inbox.empty(self._capacity)
+            return self._no_mail
         rows, contents = [], []
         for msg in sense.received:
             try:
