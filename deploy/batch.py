@@ -34,6 +34,14 @@ def inbox_from(observation: Observation, sent: BrainOutput | None, robot_ids: np
     )
 
 
+def swarm_brain(scenario: Scenario, robot_ids=None) -> ForagingBrain:
+    """One brain holding the robots ``robot_ids`` (default: all) of a scenario, each with its own
+    generator, exactly as each agent process builds its batch of one."""
+    w = scenario.world
+    ids = np.arange(w.robots) if robot_ids is None else np.asarray(robot_ids)
+    return ForagingBrain(scenario.agent, w.body, ids, [agent_rng(w.seed, int(i)) for i in ids], w.tick_s)
+
+
 @dataclass
 class BatchResult:
     metrics: dict
@@ -53,13 +61,7 @@ def run_batch(
     world = ForagingWorld(scenario.world)
     n = world.n_robots
     ids = np.arange(n)
-    brain = ForagingBrain(
-        scenario.agent,
-        scenario.world.body,
-        ids,
-        [agent_rng(scenario.world.seed, i) for i in ids],
-        scenario.world.tick_s,
-    )
+    brain = swarm_brain(scenario, ids)
     kill_at = kill_at or {}
     sent: BrainOutput | None = None
     while not world.done:

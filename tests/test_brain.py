@@ -29,7 +29,7 @@ from swarmloc.agents.foraging import (
     classify_ground,
     on_path,
 )
-from swarmloc.deploy.batch import inbox_from
+from swarmloc.deploy.batch import inbox_from, swarm_brain
 from swarmloc.deploy.scenario import load_scenario
 from swarmloc.protocol.epuck import EpuckBody
 from swarmloc.world.foraging import ForagingWorld
@@ -547,13 +547,7 @@ def test_two_robots_exchange_the_nest_exactly_through_the_world(strategy):
     start = np.array([[0.60, 0.50, 2.0], [0.70, 0.55, -0.7]])  # 11.2 cm apart, off the areas
     world.pose = start.copy()
     ids = np.arange(2)
-    brain = ForagingBrain(
-        scenario.agent,
-        scenario.world.body,
-        ids,
-        [agent_rng(scenario.world.seed, i) for i in ids],
-        scenario.world.tick_s,
-    )
+    brain = swarm_brain(scenario, ids)
     nest_world = scenario.world.arena.nest_centre_m
     assert nest_world == (0.6, 0.255)
     # Robot 0 knows the nest exactly: the nest centre in its own odometric frame, p = 0.
