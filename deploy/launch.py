@@ -26,6 +26,15 @@ PYTHON = [sys.executable, "-m", "swarmloc"]
 CHILD_ENV = {"PYTHONUNBUFFERED": "1", "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1",
              "MKL_NUM_THREADS": "1"}
 
+#: Zenoh's async pools all handed over to one worker thread: a piece of a local swarm sends and
+#: receives a few messages per tick, and with a hundred processes on two cores the hand-overs
+#: between Zenoh's default pools cost more than they save (100 null agents: 44 -> 53 ticks/s;
+#: 100 real agents: 20 -> 23 ticks/s). A ZENOH_RUNTIME set by the user wins.
+ZENOH_RUNTIME_LOCAL = (
+    "(rx: (handover: app), net: (handover: app), acc: (handover: app), tx: (handover: app), "
+    "app: (worker_threads: 1))"
+)
+
 
 @dataclass
 class Supervisor:
@@ -46,7 +55,7 @@ class Supervisor:
                 stderr=sink,
                 stdin=subprocess.DEVNULL,
                 start_new_session=True,
-                env={**os.environ, **CHILD_ENV},
+                env={"ZENOH_RUNTIME": ZENOH_RUNTIME_LOCAL, **os.environ, **CHILD_ENV},
             )
         finally:
             if log is not None:
