@@ -25,15 +25,9 @@ PYTHON = [sys.executable, "-m", "swarmloc"]
 #: spinning cost 25 % of the tick rate at 10 robots (163 -> 219 ticks/s measured).
 CHILD_ENV = {"PYTHONUNBUFFERED": "1", "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1",
              "MKL_NUM_THREADS": "1"}
-
-#: Zenoh's async pools all handed over to one worker thread: a piece of a local swarm sends and
-#: receives a few messages per tick, and with a hundred processes on two cores the hand-overs
-#: between Zenoh's default pools cost more than they save (100 null agents: 44 -> 53 ticks/s;
-#: 100 real agents: 20 -> 23 ticks/s). A ZENOH_RUNTIME set by the user wins.
-ZENOH_RUNTIME_LOCAL = (
-    "(rx: (handover: app), net: (handover: app), acc: (handover: app), tx: (handover: app), "
-    "app: (worker_threads: 1))"
-)
+# Zenoh's own thread pools stay at their defaults. Handing every pool over to one worker thread
+# (ZENOH_RUNTIME) was faster (100 agents 20 -> 23 ticks/s) but a single 300 KB message then stalled
+# that thread past the link lease: the world lost every agent's liveliness and the run changed.
 
 
 @dataclass
@@ -55,7 +49,7 @@ class Supervisor:
                 stderr=sink,
                 stdin=subprocess.DEVNULL,
                 start_new_session=True,
-                env={"ZENOH_RUNTIME": ZENOH_RUNTIME_LOCAL, **os.environ, **CHILD_ENV},
+                env={**os.environ, **CHILD_ENV},
             )
         finally:
             if log is not None:

@@ -9,12 +9,14 @@ from __future__ import annotations
 
 import json
 import secrets
+import subprocess
 import sys
 import threading
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
-from swarmloc.deploy.launch import start_announcing, start_router, supervised
+from swarmloc.deploy.launch import Supervisor, start_announcing, start_router, supervised
 from swarmloc.deploy.scenario import Scenario
 
 
@@ -63,6 +65,39 @@ def _progress_follower(endpoint: str, run: str, total_ticks: int, quiet: bool):
     return stop
 
 
+@dataclass
+class LocalSwarm:
+    """The processes of one local run, as :func:`start_swarm` started them."""
+
+    router_endpoint: str  # where observers and remote pieces connect
+    world: subprocess.Popen
+    world_endpoint: str  # where the agents connect
+    agents: list[subprocess.Popen]
+
+
+def start_swarm(sup: Supervisor, scenario_file: Path, *, run: str, robots: int, out: Path,
+                log_dir: Path, realtime: bool = False, join_timeout_s: float = 180.0) -> LocalSwarm:
+    """Start a router, the world-server and ``robots`` agents under ``sup``.
+
+    The world's own session is a router that the agents reach directly (one hop less for each of
+    the 2N lockstep messages of a tick); it links to the standalone router, where observers and
+    pieces on other hosts connect. Every piece that listens announces its endpoint: readiness.
+    """
+    _, endpoint = start_router(sup)
+    world_args = ["world", str(scenario_file), "-m", "router", "-l", "tcp/127.0.0.1:0",
+                  "-e", endpoint, "--run", run, "--out", str(out), "--announce",
+                  "--join-timeout-s", str(join_timeout_s)]
+    if realtime:
+        world_args.append("--realtime")
+    world, world_endpoint = start_announcing(sup, world_args, log_path=log_dir / "world.log")
+    agents = [
+        sup.start(["agent", "--robot", str(i), "-m", "client", "-e", world_endpoint, "--run", run,
+                   "--join-timeout-s", str(join_timeout_s)], log_path=log_dir / f"agent-{i}.log")
+        for i in range(robots)
+    ]
+    return LocalSwarm(endpoint, world, world_endpoint, agents)
+
+
 def run_local(scenario: Scenario, *, run_name: str | None, out_root: Path, realtime: bool,
               quiet: bool, join_timeout_s: float = 180.0) -> int:
     w = scenario.world
@@ -76,24 +111,14 @@ def run_local(scenario: Scenario, *, run_name: str | None, out_root: Path, realt
     say = (lambda *a: None) if quiet else (lambda *a: print(*a, file=sys.stderr, flush=True))
     t0 = time.perf_counter()
     with supervised() as sup:
-        _, endpoint = start_router(sup)
-        say(f"router on {endpoint}; run '{run}': {w.robots} robots, {scenario.agent.strategy}, "
-            f"seed {w.seed}, {w.duration_s:.0f} s simulated ({'real time' if realtime else 'lockstep'})")
-        # The world's own session is a router that the agents reach directly (one hop less for
-        # each of the 2N lockstep messages of a tick); it links to the standalone router, where
-        # observers and pieces on other hosts connect.
-        world_args = ["world", str(scenario_file), "-m", "router", "-l", "tcp/127.0.0.1:0",
-                      "-e", endpoint, "--run", run, "--out", str(out), "--announce",
-                      "--join-timeout-s", str(join_timeout_s)]
-        if realtime:
-            world_args.append("--realtime")
-        world, world_endpoint = start_announcing(sup, world_args, log_path=log_dir / "world.log")
-        for i in range(w.robots):
-            sup.start(["agent", "--robot", str(i), "-m", "client", "-e", world_endpoint, "--run", run,
-                       "--join-timeout-s", str(join_timeout_s)], log_path=log_dir / f"agent-{i}.log")
-        stop_progress = _progress_follower(endpoint, run, w.n_ticks, quiet)
+        swarm = start_swarm(sup, scenario_file, run=run, robots=w.robots, out=out, log_dir=log_dir,
+                            realtime=realtime, join_timeout_s=join_timeout_s)
+        say(f"router on {swarm.router_endpoint}; run '{run}': {w.robots} robots, "
+            f"{scenario.agent.strategy}, seed {w.seed}, {w.duration_s:.0f} s simulated "
+            f"({'real time' if realtime else 'lockstep'})")
+        stop_progress = _progress_follower(swarm.router_endpoint, run, w.n_ticks, quiet)
         try:
-            code = world.wait()
+            code = swarm.world.wait()
         finally:
             stop_progress()
     results_file = out / "results.json"

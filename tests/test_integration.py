@@ -16,9 +16,11 @@ import threading
 import uuid
 
 import pytest
+import zenoh
 
 from swarmloc.deploy.batch import run_batch
-from swarmloc.deploy.launch import start_router, supervised
+from swarmloc.deploy.launch import supervised
+from swarmloc.deploy.run import start_swarm
 from swarmloc.deploy.scenario import load_scenario
 from swarmloc.protocol.keys import Keys
 from swarmloc.protocol.messages import EpuckAct, WorldState, decode, encode
@@ -35,23 +37,16 @@ def _scenario(tmp_path, overrides):
 
 
 class Swarm:
-    """A router, a world-server and agents, started for one test."""
+    """A router, a world-server and agents, started for one test as `swarmloc run` starts them."""
 
     def __init__(self, sup, tmp_path, scenario_path, robots: int, realtime: bool = False):
-        self.sup = sup
         self.run = "t" + uuid.uuid4().hex[:10]
         self.keys = Keys(self.run)
-        _, self.endpoint = start_router(sup)
         self.out = tmp_path / "out"
-        transport = ["-m", "client", "-e", self.endpoint, "--run", self.run]
-        args = ["world", str(scenario_path), *transport, "--out", str(self.out), "--join-timeout-s", "60"]
-        if realtime:
-            args.append("--realtime")
-        self.world = sup.start(args, log_path=tmp_path / "world.log")
-        self.agents = [
-            sup.start(["agent", "--robot", str(i), *transport], log_path=tmp_path / f"agent{i}.log")
-            for i in range(robots)
-        ]
+        swarm = start_swarm(sup, scenario_path, run=self.run, robots=robots, out=self.out,
+                            log_dir=tmp_path, realtime=realtime, join_timeout_s=60)
+        self.endpoint = swarm.router_endpoint  # observers (the test) connect here
+        self.world, self.agents = swarm.world, swarm.agents
 
     def results(self, timeout_s: float = 120.0) -> dict:
         code = self.world.wait(timeout=timeout_s)
@@ -136,14 +131,14 @@ def test_bad_messages_are_rejected_counted_and_change_nothing(tmp_path):
                    "payload": None, "state": 0, "pose_estimate": [0.0, 0.0, 0.0]}
             bad[k.act(1)].append(msgpack.packb(raw))
             for key, payloads in bad.items():
-                for payload in payloads:
-                    session.put(key, payload)
+                for payload in payloads:  # BLOCK: the default (DROP) may lose some of them
+                    session.put(key, payload, congestion_control=zenoh.CongestionControl.BLOCK)
             result = swarm.results()
     batch = run_batch(scenario)
     assert result["reason"] == "completed"
     assert result["metrics"] == json.loads(json.dumps(batch.metrics)), "bad input changed the run"
     assert result["rejected"].get("act", 0) >= 5
-    agent0_log = (tmp_path / "agent0.log").read_text()
+    agent0_log = (tmp_path / "agent-0.log").read_text()
     assert "rejected sense" in agent0_log
 
 
