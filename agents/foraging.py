@@ -35,6 +35,7 @@ from swarmloc.protocol.epuck import (
     IR_SENSOR_ANGLES_RAD,
     EpuckBody,
     integrate_pose,
+    propagate_covariance,
     wrap_angle,
 )
 
@@ -57,6 +58,8 @@ KNOWS_BOTH = 4
 # each with +-30 % noise) are disjoint; the thresholds sit between them.
 GROUND_BLACK_BELOW = 0.25
 GROUND_GREY_BELOW = 0.68
+
+_XY_BLOCK = np.diag([1.0, 1.0, 0.0])
 
 #: Where the middle ground sensor sits ahead of the body centre (m).
 GROUND_SENSOR_M = float(GROUND_SENSOR_OFFSETS_M[1, 0])
@@ -103,6 +106,10 @@ class AgentConfig:
     arrival_tolerance_m: float = 0.02
     #: How far past the estimated goal the robot keeps looking before it declares itself lost.
     search_overshoot_m: float = 0.10
+    #: The odometry error constants k_r = k_l of seed 000 eq. 10 (m: variance per metre of wheel
+    #: travel), known to SIKF robots ("covariance knowledge", seed 001 §5). Default: what the
+    #: world's +-20 % uniform slip per tick gives at cruise speed, s^2 |dU| / 3.
+    odometry_k_m: float = 1.37e-4
     #: How many neighbours' bearings a robot repeats in its messages (needed for eq. 27).
     heard_capacity: int = 3
     #: Two robots exchange once per encounter (seed 000 §4.1, §5): after an exchange the partner
@@ -127,6 +134,7 @@ class AgentConfig:
             "turn_speed_steps_s",
             "arrival_tolerance_m",
             "turn_in_place_rad",
+            "odometry_k_m",
         ):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name}: must be > 0, got {getattr(self, name)}")
@@ -237,6 +245,12 @@ class SocialMessages:
         return out
 
 
+def _spectral_norm_xy(cov: np.ndarray) -> np.ndarray:
+    """Largest eigenvalue of the position block of covariances ``(..., 3, 3)`` (m^2)."""
+    a, b, c = cov[..., 0, 0], cov[..., 0, 1], cov[..., 1, 1]
+    return (a + c) / 2.0 + np.sqrt(((a - c) / 2.0) ** 2 + b * b)
+
+
 def _f32(x: np.ndarray) -> np.ndarray:
     return np.asarray(x, np.float32).astype(np.float64)
 
@@ -309,6 +323,10 @@ class ForagingBrain:
         self.known = np.zeros((n, 2), bool)
         self.goal_xy = np.zeros((n, 2, 2))
         self.goal_p_m = np.zeros((n, 2))
+        # Covariance of each goal estimate (SIKF strategies only): the pose covariance since the
+        # robot left that area, seed 000 eq. 9 with P_0 = 0 at the area.
+        uses_cov = STRATEGIES[config.strategy].confidence == "covariance"
+        self.goal_cov = np.zeros((n, 2, 3, 3)) if uses_cov else None
         self.target = np.full(n, -1, np.int64)
         self.searching = np.zeros(n, bool)
         self.search_left_m = np.zeros(n)
@@ -339,8 +357,19 @@ class ForagingBrain:
         self.pose_history = (self.pose_history[1], self.pose)
         self.pose = integrate_pose(self.pose, du[:, 0], du[:, 1], self.body.wheelbase_m)
         travelled = np.abs(du[:, 0] + du[:, 1]) / 2.0
-        self.goal_p_m += travelled[:, None]
         self.search_left_m -= travelled
+        if self.goal_cov is None:
+            self.goal_p_m += travelled[:, None]  # eq. 23: p is the distance travelled
+            return
+        # eq. 9-11 for each goal's covariance since the robot left it, then eq. 19.
+        k = self.config.odometry_k_m
+        before = np.repeat(self.pose_history[1], 2, axis=0)
+        cov = propagate_covariance(
+            self.goal_cov.reshape(-1, 3, 3), before, np.repeat(du[:, 0], 2), np.repeat(du[:, 1], 2),
+            self.body.wheelbase_m, k, k,
+        )
+        self.goal_cov = cov.reshape(self.n, 2, 3, 3)
+        self.goal_p_m = _spectral_norm_xy(self.goal_cov)
 
     def _arrive(self, area: np.ndarray) -> None:
         """Store goal locations seen by the ground sensors; switch target on arrival.
@@ -366,6 +395,8 @@ class ForagingBrain:
             self.goal_xy[inside, goal] = prev + (sensor[inside] - prev) / count[:, None]
             self.known[inside, goal] = True
             self.goal_p_m[inside, goal] = 0.0
+            if self.goal_cov is not None:
+                self.goal_cov[inside, goal] = 0.0
             other = 1 - goal
             arrived = inside & ((self.target == goal) | (self.target < 0))
             self.target[arrived] = np.where(self.known[arrived, other], other, -1)
@@ -378,6 +409,8 @@ class ForagingBrain:
         if lost.any():
             self.known[lost] = False
             self.goal_p_m[lost] = 0.0
+            if self.goal_cov is not None:
+                self.goal_cov[lost] = 0.0
             self.target[lost] = -1
             self.searching[lost] = False
             self.lost_count[lost] += 1
@@ -452,6 +485,8 @@ class ForagingBrain:
                 new = ~knew
                 self.goal_xy[rr[new], goal] = x_other[new]
                 self.goal_p_m[rr[new], goal] = p_other[new]
+                if self.goal_cov is not None:  # only the norm crossed the air: isotropic
+                    self.goal_cov[rr[new], goal] = p_other[new, None, None] * _XY_BLOCK
                 self.known[rr[new], goal] = True
                 adopted[rr[new], goal] = True
                 # eq. 15-16: both know it; single strategies fuse only the goal they head to.
@@ -465,6 +500,10 @@ class ForagingBrain:
                         x_other[fuse_mask],
                         p_other[fuse_mask] / unit,
                     )
+                    if self.goal_cov is not None:  # eq. 22 on the whole matrix: P <- (1 - g) P
+                        old = self.goal_p_m[rf, goal] / unit
+                        scale = np.divide(p_new, old, out=np.zeros_like(p_new), where=old > 0)
+                        self.goal_cov[rf, goal] *= scale[:, None, None]
                     self.goal_xy[rf, goal] = x_new
                     self.goal_p_m[rf, goal] = p_new * unit
         # A wandering robot recruited to a goal heads for it (seed 000 §6.1.1); of two, the nearer.

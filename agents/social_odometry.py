@@ -12,6 +12,10 @@ neighbour that knows the same goal it fuses the two estimates with a scalar gain
 A robot that does not know a goal adopts the neighbour's estimate and confidence (eq. 14). "Single"
 strategies fuse only the goal the robot is heading to, "double" ones both (seed 000 §6.1).
 
+SSIKF/DSIKF are the SIKF of eq. 18-22, whose ``p`` is the spectral norm of the odometry
+covariance (eq. 19) instead of the distance travelled: seed 001's "covariance knowledge"
+comparison, where robots know their odometry error model.
+
 The neighbour's estimate arrives in the neighbour's body frame; :func:`transform_received` turns it
 into the receiver's body frame from the range and the two bearings (eq. 27).
 
@@ -34,6 +38,10 @@ class Strategy:
     communicates: bool
     double: bool
     gain: str  # "none", "kalman" or "fermi"
+    #: What ``p`` (inverse confidence) is: "distance" travelled since the area (eq. 23, the
+    #: SGI filters), or "covariance": the spectral norm of the odometry covariance propagated
+    #: with eq. 9-11 (eq. 19, the SIKF; seed 001's "covariance knowledge").
+    confidence: str = "distance"
 
 
 #: The registry of strategies, by the names the papers use.
@@ -45,6 +53,8 @@ STRATEGIES: dict[str, Strategy] = {
         Strategy("DSGIKF", communicates=True, double=True, gain="kalman"),
         Strategy("SSGIFF", communicates=True, double=False, gain="fermi"),
         Strategy("DSGIFF", communicates=True, double=True, gain="fermi"),
+        Strategy("SSIKF", communicates=True, double=False, gain="kalman", confidence="covariance"),
+        Strategy("DSIKF", communicates=True, double=True, gain="kalman", confidence="covariance"),
     )
 }
 
