@@ -41,7 +41,7 @@ def _scenario_args(p: argparse.ArgumentParser, positional: bool = True) -> None:
                             "default ES1 (for `swarmloc run`: ES1 shortened to 600 s)")
     g = p.add_argument_group("scenario overrides")
     g.add_argument("--robots", type=int, help="number of robots")
-    g.add_argument("--strategy", help="NC, SSGIKF, DSGIKF, SSGIFF or DSGIFF")
+    g.add_argument("--strategy", help="NC, SSGIKF, DSGIKF, SSGIFF, DSGIFF, SSIKF or DSIKF")
     g.add_argument("--beta", type=float, help="Fermi beta of the SGIFFs")
     g.add_argument("--seed", type=int, help="run seed")
     g.add_argument("--duration-s", type=float, help="simulated duration in seconds")
