@@ -220,6 +220,8 @@ def _print_metrics(summary: dict) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from swarmloc.deploy import experiment
+
     parser = argparse.ArgumentParser(prog="swarmloc", description=__doc__.splitlines()[0])
     parser.add_argument("-v", "--verbose", action="store_true", help="log more")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -262,6 +264,8 @@ def build_parser() -> argparse.ArgumentParser:
     _scenario_args(p)
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=main_batch)
+
+    experiment.add_parser(sub)
 
     p = sub.add_parser("scenarios", help="list the shipped scenarios")
     p.set_defaults(func=main_scenarios)
