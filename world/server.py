@@ -52,7 +52,8 @@ class TickStats:
     ticks: int = 0
     started_s: float = 0.0
     tick_durations_s: list = field(default_factory=list)
-    late_acts: int = 0
+    late_acts: int = 0  # live robots whose act missed its tick (deadline or lockstep timeout)
+    stale_acts: int = 0  # acts that arrived after their tick was closed
     overruns: int = 0
 
     def summary(self) -> dict:
@@ -65,6 +66,7 @@ class TickStats:
             "tick_ms_p50": round(float(np.percentile(d, 50)) * 1e3, 3),
             "tick_ms_p99": round(float(np.percentile(d, 99)) * 1e3, 3),
             "late_acts": self.late_acts,
+            "stale_acts": self.stale_acts,
             "overruns": self.overruns,
         }
 
@@ -160,7 +162,7 @@ class WorldServer:
             return
         with self._cond:
             if act.tick != self._current_tick:
-                self.stats.late_acts += 1
+                self.stats.stale_acts += 1
                 return
             if self._got[robot]:
                 self.errors.record(key, "duplicate act", ValueError(f"second act for tick {act.tick}"))
@@ -270,8 +272,7 @@ class WorldServer:
             self._collect(started)
             with self._cond:
                 self._current_tick = -1  # acts arriving now are late
-                missing = ~self._got
-                self.stats.late_acts += int((missing & world.alive).sum()) if self.realtime else 0
+                self.stats.late_acts += int((~self._got & world.alive & self._live).sum())
                 cmd = self._cmd.copy()  # a missing act keeps the previous command
                 sending = self._sending & self._got
                 on_path = ((self._state & _TARGET_MASK) != 0) & ((self._state & _KNOWS_BOTH) != 0)
