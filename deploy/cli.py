@@ -220,7 +220,7 @@ def _print_metrics(summary: dict) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from swarmloc.deploy import experiment
+    from swarmloc.deploy import experiment, report
 
     parser = argparse.ArgumentParser(prog="swarmloc", description=__doc__.splitlines()[0])
     parser.add_argument("-v", "--verbose", action="store_true", help="log more")
@@ -266,6 +266,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=main_batch)
 
     experiment.add_parser(sub)
+    report.add_parser(sub)
 
     p = sub.add_parser("scenarios", help="list the shipped scenarios")
     p.set_defaults(func=main_scenarios)
