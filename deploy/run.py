@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import secrets
+import signal
 import subprocess
 import sys
 import threading
@@ -110,6 +111,13 @@ def run_local(scenario: Scenario, *, run_name: str | None, out_root: Path, realt
     log_dir.mkdir(exist_ok=True)
     say = (lambda *a: None) if quiet else (lambda *a: print(*a, file=sys.stderr, flush=True))
     t0 = time.perf_counter()
+
+    def terminated(signum, frame):
+        # Python's default SIGTERM ends the process without running `finally`: the pieces would
+        # be orphaned. Unwind instead, so that the supervisor stops every one of them.
+        raise SystemExit(128 + signum)
+
+    signal.signal(signal.SIGTERM, terminated)
     with supervised() as sup:
         swarm = start_swarm(sup, scenario_file, run=run, robots=w.robots, out=out, log_dir=log_dir,
                             realtime=realtime, join_timeout_s=join_timeout_s)

@@ -182,3 +182,63 @@ def test_bad_option_stops_before_anything_starts(tmp_path):
     assert proc.returncode == 2
     assert "world.robts" in proc.stderr and "robots" in proc.stderr
     assert not any(tmp_path.iterdir()), "no run folder for a refused run"
+
+
+def _children(parent: int) -> list[int]:
+    """Processes whose parent is ``parent`` (from /proc)."""
+    pids = []
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                stat = open(f"/proc/{entry}/stat").read()
+            except OSError:
+                continue
+            if int(stat.rsplit(")", 1)[1].split()[1]) == parent:
+                pids.append(int(entry))
+    return pids
+
+
+def _alive(pids: list[int]) -> list[int]:
+    out = []
+    for pid in pids:
+        try:
+            state = open(f"/proc/{pid}/stat").read().rsplit(")", 1)[1].split()[0]
+        except OSError:
+            continue
+        if state != "Z":
+            out.append(pid)
+    return out
+
+
+def test_sigterm_to_swarmloc_run_stops_every_piece(tmp_path):
+    import time
+
+    run = "term" + uuid.uuid4().hex[:8]
+    out = tmp_path / "runs"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "swarmloc", "run", "--robots", "3", "--duration-s", "3600",
+         "--out", str(out), "--run", run, "--quiet"],
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
+    )
+    try:
+        # Readiness: the last agent's log exists once every piece has been started.
+        deadline = time.monotonic() + 60
+        last_log = out / run / "logs" / "agent-2.log"
+        while not last_log.exists():
+            assert time.monotonic() < deadline, "the swarm never started"
+            assert proc.poll() is None, "swarmloc run exited early"
+            time.sleep(0.05)  # polling a file for readiness, bounded by the deadline
+        pieces = _children(proc.pid)
+        assert len(pieces) == 5  # router, world, 3 agents
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=30) != 0
+        deadline = time.monotonic() + 10
+        while _alive(pieces) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert _alive(pieces) == [], "pieces of the run survived the launcher"
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+        for pid in _alive(pieces if "pieces" in locals() else []):  # never leave one behind
+            os.kill(pid, signal.SIGKILL)
