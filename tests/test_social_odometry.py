@@ -40,8 +40,9 @@ def _a(*values) -> np.ndarray:
 # ---------------------------------------------------------------------------------------------
 
 
-def test_registry_has_exactly_the_five_strategies_of_the_paper():
-    assert set(STRATEGIES) == {"NC", "SSGIKF", "DSGIKF", "SSGIFF", "DSGIFF"}
+def test_registry_has_the_five_strategies_of_the_paper_and_the_sikf_pair():
+    # Seed 000 §6.1's five, plus the SIKF of eq. 18-22 (seed 001's "covariance knowledge").
+    assert set(STRATEGIES) == {"NC", "SSGIKF", "DSGIKF", "SSGIFF", "DSGIFF", "SSIKF", "DSIKF"}
 
 
 @pytest.mark.parametrize(
@@ -52,6 +53,8 @@ def test_registry_has_exactly_the_five_strategies_of_the_paper():
         ("DSGIKF", True, True, "kalman"),
         ("SSGIFF", True, False, "fermi"),
         ("DSGIFF", True, True, "fermi"),
+        ("SSIKF", True, False, "kalman"),
+        ("DSIKF", True, True, "kalman"),
     ],
 )
 def test_registry_flags(name, communicates, double, gain):
