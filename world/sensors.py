@@ -11,8 +11,8 @@ from ``swarmloc.protocol.epuck``.
   multiplicative noise ``1 + U(-f, f)``, clipped to [0, 1].
 - :func:`ground_sensors`: floor reflectance (``world/arena.py``) under each ground sensor, times
   ``1 + U(-f, f)``.
-- :func:`classify_ground`: what the robot concludes from its 3 ground readings, with thresholds
-  between the noisy reflectance bands. Used by the agent; pure, numpy only.
+  What a robot concludes from the readings is the agent's business
+  (``swarmloc.agents.foraging.classify_ground``).
 
 Random draws (fixed order, so a run is deterministic given ``rng``): :func:`ir_proximity` makes one
 ``rng.uniform(-f, f, size=(N, 8))`` call; :func:`ground_sensors` one
@@ -29,13 +29,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from swarmloc.protocol.epuck import GROUND_SENSOR_OFFSETS_M, IR_SENSOR_ANGLES_RAD
-from swarmloc.world.arena import AREA_NEST, AREA_NONE, AREA_PREY, Arena, ground_reflectance
-
-#: Ground readings below this are black (nest): black 0.1 ± 30 % lies in [0.07, 0.13].
-NEST_BELOW = 0.25
-#: Ground readings in [NEST_BELOW, PREY_BELOW) are grey (prey): grey 0.5 ± 30 % lies in
-#: [0.35, 0.65]; white 1.0 ± 30 % lies in [0.7, 1.3].
-PREY_BELOW = 0.68
+from swarmloc.world.arena import Arena, ground_reflectance
 
 
 @dataclass(frozen=True)
@@ -176,16 +170,3 @@ def ground_sensors(
     f = params.ground_noise_fraction
     noise = rng.uniform(-f, f, size=reflectance.shape)
     return reflectance * (1.0 + noise)
-
-
-def classify_ground(readings: np.ndarray) -> np.ndarray:
-    """Area code (int8) a robot concludes from its ground readings ``(N, 3)``.
-
-    ``AREA_NEST`` if any reading is below ``NEST_BELOW`` (0.25); else ``AREA_PREY`` if any reading
-    is in ``[NEST_BELOW, PREY_BELOW)`` = [0.25, 0.68); else ``AREA_NONE``. With ±30 % noise the
-    bands black [0.07, 0.13], grey [0.35, 0.65] and white [0.7, 1.3] never cross a threshold.
-    """
-    readings = np.asarray(readings, dtype=float)
-    nest = (readings < NEST_BELOW).any(axis=-1)
-    prey = ((readings >= NEST_BELOW) & (readings < PREY_BELOW)).any(axis=-1)
-    return np.where(nest, AREA_NEST, np.where(prey, AREA_PREY, AREA_NONE)).astype(np.int8)
