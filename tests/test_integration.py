@@ -47,6 +47,7 @@ class Swarm:
         swarm = start_swarm(sup, scenario_path, run=self.run, robots=robots, out=self.out,
                             log_dir=tmp_path, realtime=realtime, join_timeout_s=60)
         self.endpoint = swarm.router_endpoint  # observers (the test) connect here
+        self.world_endpoint = swarm.world_endpoint  # agents connect here
         self.world, self.agents = swarm.world, swarm.agents
 
     def results(self, timeout_s: float = 120.0) -> dict:
@@ -243,3 +244,35 @@ def test_sigterm_to_swarmloc_run_stops_every_piece(tmp_path):
             proc.wait()
         for pid in _alive(pieces if "pieces" in locals() else []):  # never leave one behind
             os.kill(pid, signal.SIGKILL)
+
+
+def test_restarted_agent_rejoins_its_robot(tmp_path):
+    _, path = _scenario(tmp_path, ["world.robots=3", "world.duration_s=300.0"])
+    states: list[WorldState] = []
+    started, dead_seen, back_seen = threading.Event(), threading.Event(), threading.Event()
+    with supervised() as sup:
+        swarm = Swarm(sup, tmp_path, path, robots=3)
+        with _client(swarm.endpoint) as session:
+
+            def on_state(sample):
+                s = decode(sample.payload.to_bytes(), WorldState)
+                states.append(s)
+                started.set()
+                if not s.alive[1]:
+                    dead_seen.set()
+                elif dead_seen.is_set():
+                    back_seen.set()
+
+            session.declare_subscriber(swarm.keys.world_state, on_state)
+            assert started.wait(60), "the run never started"
+            os.kill(swarm.agents[1].pid, signal.SIGKILL)
+            assert dead_seen.wait(60), "the world never noticed the dead agent"
+            # The same robot's agent again, as an operator would restart it.
+            sup.start(["agent", "--robot", "1", "-m", "client", "-e", swarm.world_endpoint,
+                       "--run", swarm.run], log_path=tmp_path / "agent-1-again.log")
+            assert back_seen.wait(60), "the restarted agent did not get its robot back"
+            result = swarm.results()
+    assert result["reason"] == "completed" and result["dead_robots"] == []
+    revived = [s for s in states if s.alive[1] and s.tick > min(t.tick for t in states if not t.alive[1])]
+    first, last = revived[0].poses[1], revived[-1].poses[1]
+    assert abs(last[0] - first[0]) + abs(last[1] - first[1]) > 0.02, "the revived robot moves again"
