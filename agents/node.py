@@ -6,8 +6,9 @@ A thin shell around :class:`ForagingBrain` with a batch of one:
 2. subscribe to this robot's ``sense`` key, then declare its liveliness token (the world waits
    for it, so the first Sense never finds the agent deaf);
 3. on each Sense: decode, step the brain, publish the Act;
-4. stop on ``RunEnd``, on a final Sense, on SIGINT/SIGTERM, or when the world is gone for longer
-   than ``world_timeout_s``; close the session on the way out.
+4. stop on ``RunEnd``, on a final Sense, on SIGINT/SIGTERM, when the world's liveliness token has
+   been gone for ``world_grace_s`` (a world restarting within that time is waited for), or when
+   no Sense came for ``world_timeout_s``; close the session on the way out.
 
 A malformed Sense, or a neighbour's malformed payload inside a valid Sense, is rejected, counted
 and logged once; the agent keeps running.
@@ -41,6 +42,11 @@ from swarmloc.protocol.messages import (
 )
 
 log = logging.getLogger("swarmloc.agent")
+
+
+WORLD_GONE = "the world-server is gone"
+#: Exit code of an agent whose world died (and did not come back within the grace period).
+EXIT_WORLD_GONE = 3
 
 
 class JoinError(RuntimeError):
@@ -87,6 +93,7 @@ class AgentNode:
         self.done = threading.Event()
         self.end_reason = ""
         self.last_sense_at = time.monotonic()
+        self.world_lost_at: float | None = None
         self.ticks = 0
         self._capacity = brain.config.heard_capacity
         self._no_mail = Inbox.empty(self._capacity)
@@ -155,22 +162,36 @@ class AgentNode:
         self.end_reason = f"run ended: {end.reason}"
         self.done.set()
 
+    def _on_world_alive(self, sample: zenoh.Sample) -> None:
+        if sample.kind == zenoh.SampleKind.PUT:
+            self.world_lost_at = None
+        else:
+            self.world_lost_at = time.monotonic()
+            log.warning("robot %d: the world-server is gone; waiting for it", self.robot_id)
+
     def declare(self) -> None:
         s, k = self.session, self.keys
         self._act_pub = s.declare_publisher(
             k.act(self.robot_id), congestion_control=zenoh.CongestionControl.BLOCK
         )
         self._decls.append(s.declare_subscriber(k.run_end, self._on_end))
+        self._decls.append(
+            s.liveliness().declare_subscriber(k.world_alive, self._on_world_alive, history=True)
+        )
         self._decls.append(s.declare_subscriber(k.sense(self.robot_id), self._on_sense))
         # Declared last: the world sees us only once we can hear it.
         self._token = s.liveliness().declare_token(k.alive(self.robot_id))
 
-    def wait(self, stop: threading.Event, world_timeout_s: float) -> str:
-        """Wait until the run ends, we are told to stop, or the world is silent too long."""
+    def wait(self, stop: threading.Event, world_timeout_s: float, world_grace_s: float) -> str:
+        """Wait until the run ends, we are told to stop, or the world is gone or silent too long."""
         while not self.done.is_set():
             if stop.wait(0.2):
                 return "signal"
-            if time.monotonic() - self.last_sense_at > world_timeout_s:
+            now = time.monotonic()
+            lost = self.world_lost_at
+            if lost is not None and now - lost > world_grace_s:
+                return WORLD_GONE
+            if now - self.last_sense_at > world_timeout_s:
                 return f"no sense from the world for {world_timeout_s:.0f} s"
         return self.end_reason
 
@@ -183,6 +204,7 @@ def run_agent(
     *,
     join_timeout_s: float = 120.0,
     world_timeout_s: float = 300.0,
+    world_grace_s: float = 10.0,
 ) -> int:
     """Run one agent to the end of the run; returns a process exit code."""
     try:
@@ -193,6 +215,6 @@ def run_agent(
         return 2
     node = AgentNode(session, keys, robot_id, brain)
     node.declare()
-    reason = node.wait(stop, world_timeout_s)
+    reason = node.wait(stop, world_timeout_s, world_grace_s)
     log.info("robot %d: %s after %d ticks; rejected %s", robot_id, reason, node.ticks, dict(node.errors.counts))
-    return 0
+    return EXIT_WORLD_GONE if reason == WORLD_GONE else 0

@@ -177,7 +177,7 @@ def main_agent(args) -> int:
     keys = Keys(args.run)
     with open_session(config_from_args(args)) as session:
         return run_agent(session, keys, args.robot, stop, join_timeout_s=args.join_timeout_s,
-                         world_timeout_s=args.world_timeout_s)
+                         world_timeout_s=args.world_timeout_s, world_grace_s=args.world_grace_s)
 
 
 def main_batch(args) -> int:
@@ -252,7 +252,10 @@ def build_parser() -> argparse.ArgumentParser:
     _run_name(p)
     _transport(p)
     p.add_argument("--join-timeout-s", type=float, default=180.0)
-    p.add_argument("--world-timeout-s", type=float, default=60.0)
+    p.add_argument("--world-timeout-s", type=float, default=60.0,
+                   help="exit when no Sense came for this long")
+    p.add_argument("--world-grace-s", type=float, default=10.0,
+                   help="how long to wait for a world-server that went away to come back (exit code 3)")
     p.set_defaults(func=main_agent)
 
     p = sub.add_parser("router", help="run a Zenoh router (no zenohd needed)")

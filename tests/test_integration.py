@@ -276,3 +276,21 @@ def test_restarted_agent_rejoins_its_robot(tmp_path):
     revived = [s for s in states if s.alive[1] and s.tick > min(t.tick for t in states if not t.alive[1])]
     first, last = revived[0].poses[1], revived[-1].poses[1]
     assert abs(last[0] - first[0]) + abs(last[1] - first[1]) > 0.02, "the revived robot moves again"
+
+
+def test_agents_exit_cleanly_when_the_world_dies(tmp_path):
+    import time
+
+    _, path = _scenario(tmp_path, ["world.robots=3", "world.duration_s=600.0"])
+    started = threading.Event()
+    with supervised() as sup:
+        swarm = Swarm(sup, tmp_path, path, robots=3)
+        with _client(swarm.endpoint) as session:
+            session.declare_subscriber(swarm.keys.world_state, lambda s: started.set())
+            assert started.wait(60), "the run never started"
+            killed_at = time.monotonic()
+            os.kill(swarm.world.pid, signal.SIGKILL)
+            codes = [a.wait(timeout=40) for a in swarm.agents]
+            waited_s = time.monotonic() - killed_at
+    assert codes == [3, 3, 3], "agents report that their world is gone"
+    assert 9.0 <= waited_s <= 30.0, f"agents waited {waited_s:.1f} s (grace 10 s)"
