@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import os
 import signal
 import sys
 import threading
@@ -139,10 +140,22 @@ def main_world(args) -> int:
     if out:
         out.mkdir(parents=True, exist_ok=True)
         (out / "scenario.json").write_text(json.dumps(scenario.to_dict(), indent=2))
+    labels = {"scenario": scenario.name, "seed": scenario.world.seed, "run": args.run,
+              "strategy": scenario.agent.strategy, "robots": scenario.world.robots,
+              "mode": "realtime" if args.realtime else "lockstep"}
+
+    def write_results(result: dict) -> None:
+        # Atomic: a reader, or a crash mid-write, never sees half a file.
+        tmp = out / "results.json.tmp"
+        tmp.write_text(json.dumps({**result, **labels}, indent=2))
+        os.replace(tmp, out / "results.json")
+
     with open_session(config_from_args(args)) as session:
         server = WorldServer(session, keys, ForagingWorld(scenario.world), scenario.to_dict(),
                              realtime=args.realtime, act_timeout_s=args.act_timeout_s,
-                             join_timeout_s=args.join_timeout_s)
+                             join_timeout_s=args.join_timeout_s,
+                             checkpoint=write_results if out else None,
+                             checkpoint_every_s=args.checkpoint_s)
         server.declare()
         if args.announce:
             print(json.dumps({"endpoints": bound_endpoints(session)}), flush=True)
@@ -158,13 +171,10 @@ def main_world(args) -> int:
                 code = 0 if result["reason"] == "completed" else 4
         finally:
             server.close()
-    result.update(scenario=scenario.name, seed=scenario.world.seed, run=args.run,
-                  strategy=scenario.agent.strategy, robots=scenario.world.robots,
-                  mode="realtime" if args.realtime else "lockstep")
     if out:
-        (out / "results.json").write_text(json.dumps(result, indent=2))
+        write_results(result)
     else:
-        print(json.dumps(result))
+        print(json.dumps({**result, **labels}))
     return code
 
 
@@ -244,6 +254,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="print the endpoints this world listens on as one JSON line once it serves")
     p.add_argument("--realtime", action="store_true")
     p.add_argument("--act-timeout-s", type=float, default=10.0)
+    p.add_argument("--checkpoint-s", type=float, default=5.0,
+                   help="write the results so far to --out this often (wall seconds)")
     p.add_argument("--join-timeout-s", type=float, default=180.0)
     p.set_defaults(func=main_world)
 

@@ -77,7 +77,8 @@ class LocalSwarm:
 
 
 def start_swarm(sup: Supervisor, scenario_file: Path, *, run: str, robots: int, out: Path,
-                log_dir: Path, realtime: bool = False, join_timeout_s: float = 180.0) -> LocalSwarm:
+                log_dir: Path, realtime: bool = False, join_timeout_s: float = 180.0,
+                world_args: tuple[str, ...] = ()) -> LocalSwarm:
     """Start a router, the world-server and ``robots`` agents under ``sup``.
 
     The world's own session is a router that the agents reach directly (one hop less for each of
@@ -85,12 +86,12 @@ def start_swarm(sup: Supervisor, scenario_file: Path, *, run: str, robots: int, 
     pieces on other hosts connect. Every piece that listens announces its endpoint: readiness.
     """
     _, endpoint = start_router(sup)
-    world_args = ["world", str(scenario_file), "-m", "router", "-l", "tcp/127.0.0.1:0",
-                  "-e", endpoint, "--run", run, "--out", str(out), "--announce",
-                  "--join-timeout-s", str(join_timeout_s)]
+    args = ["world", str(scenario_file), "-m", "router", "-l", "tcp/127.0.0.1:0",
+            "-e", endpoint, "--run", run, "--out", str(out), "--announce",
+            "--join-timeout-s", str(join_timeout_s), *world_args]
     if realtime:
-        world_args.append("--realtime")
-    world, world_endpoint = start_announcing(sup, world_args, log_path=log_dir / "world.log")
+        args.append("--realtime")
+    world, world_endpoint = start_announcing(sup, args, log_path=log_dir / "world.log")
     agents = [
         sup.start(["agent", "--robot", str(i), "-m", "client", "-e", world_endpoint, "--run", run,
                    "--join-timeout-s", str(join_timeout_s)], log_path=log_dir / f"agent-{i}.log")

@@ -40,12 +40,14 @@ def _scenario(tmp_path, overrides):
 class Swarm:
     """A router, a world-server and agents, started for one test as `swarmloc run` starts them."""
 
-    def __init__(self, sup, tmp_path, scenario_path, robots: int, realtime: bool = False):
+    def __init__(self, sup, tmp_path, scenario_path, robots: int, realtime: bool = False,
+                 world_args: tuple[str, ...] = ()):
         self.run = "t" + uuid.uuid4().hex[:10]
         self.keys = Keys(self.run)
         self.out = tmp_path / "out"
         swarm = start_swarm(sup, scenario_path, run=self.run, robots=robots, out=self.out,
-                            log_dir=tmp_path, realtime=realtime, join_timeout_s=60)
+                            log_dir=tmp_path, realtime=realtime, join_timeout_s=60,
+                            world_args=world_args)
         self.endpoint = swarm.router_endpoint  # observers (the test) connect here
         self.world_endpoint = swarm.world_endpoint  # agents connect here
         self.world, self.agents = swarm.world, swarm.agents
@@ -278,19 +280,55 @@ def test_restarted_agent_rejoins_its_robot(tmp_path):
     assert abs(last[0] - first[0]) + abs(last[1] - first[1]) > 0.02, "the revived robot moves again"
 
 
-def test_agents_exit_cleanly_when_the_world_dies(tmp_path):
+def test_agents_exit_cleanly_when_the_world_dies_and_its_results_so_far_are_intact(tmp_path):
     import time
 
-    _, path = _scenario(tmp_path, ["world.robots=3", "world.duration_s=600.0"])
+    _, path = _scenario(tmp_path, ["world.robots=3", "world.duration_s=6000.0"])
     started = threading.Event()
     with supervised() as sup:
-        swarm = Swarm(sup, tmp_path, path, robots=3)
+        swarm = Swarm(sup, tmp_path, path, robots=3, world_args=("--checkpoint-s", "0.5"))
         with _client(swarm.endpoint) as session:
             session.declare_subscriber(swarm.keys.world_state, lambda s: started.set())
             assert started.wait(60), "the run never started"
+            results = swarm.out / "results.json"
+            deadline = time.monotonic() + 30
+            while not results.exists():  # the first checkpoint: bounded polling of a file
+                assert time.monotonic() < deadline, "no checkpoint written"
+                time.sleep(0.05)
             killed_at = time.monotonic()
             os.kill(swarm.world.pid, signal.SIGKILL)
             codes = [a.wait(timeout=40) for a in swarm.agents]
             waited_s = time.monotonic() - killed_at
     assert codes == [3, 3, 3], "agents report that their world is gone"
     assert 9.0 <= waited_s <= 30.0, f"agents waited {waited_s:.1f} s (grace 10 s)"
+    recorded = json.loads(results.read_text())  # written atomically: never half a file
+    assert recorded["reason"] == "running" and recorded["tick"] > 0
+    assert recorded["transport"]["ticks"] == recorded["tick"]
+    assert set(recorded["metrics"]) >= {"round_trips_total", "recruitment_time_s"}
+
+
+def test_sigterm_ends_each_piece_within_a_second(tmp_path):
+    import time
+
+    _, path = _scenario(tmp_path, ["world.robots=2", "world.duration_s=6000.0"])
+    started = threading.Event()
+    with supervised() as sup:
+        swarm = Swarm(sup, tmp_path, path, robots=2)
+        router = sup.procs[0]
+        with _client(swarm.endpoint) as session:
+            session.declare_subscriber(swarm.keys.world_state, lambda s: started.set())
+            assert started.wait(60), "the run never started"
+            t0 = time.monotonic()
+            swarm.world.send_signal(signal.SIGTERM)
+            assert swarm.world.wait(timeout=10) == 4  # stopped before the end of the run
+            world_s = time.monotonic() - t0
+            agent_codes = [a.wait(timeout=10) for a in swarm.agents]  # the run's end reached them
+            agents_s = time.monotonic() - t0
+        t1 = time.monotonic()
+        router.send_signal(signal.SIGTERM)
+        assert router.wait(timeout=10) == 0
+        router_s = time.monotonic() - t1
+    assert world_s < 1.0 and agents_s < 2.0 and router_s < 1.0, (world_s, agents_s, router_s)
+    assert agent_codes == [0, 0]
+    recorded = json.loads((swarm.out / "results.json").read_text())
+    assert recorded["reason"] == "stopped" and recorded["tick"] > 0

@@ -19,6 +19,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -85,6 +86,8 @@ class WorldServer:
         act_timeout_s: float = 10.0,
         join_timeout_s: float = 120.0,
         state_every_ticks: int = 10,
+        checkpoint: Callable[[dict], None] | None = None,
+        checkpoint_every_s: float = 5.0,
     ):
         self.session = session
         self.keys = keys
@@ -94,6 +97,10 @@ class WorldServer:
         self.act_timeout_s = act_timeout_s
         self.join_timeout_s = join_timeout_s
         self.state_every_ticks = max(1, state_every_ticks)
+        # Called with the figures so far every checkpoint_every_s of wall time, so that a
+        # world-server that dies leaves what it had recorded.
+        self.checkpoint = checkpoint
+        self.checkpoint_every_s = checkpoint_every_s
         n = world.n_robots
         self.errors = ErrorCounter()
         self.stats = TickStats()
@@ -250,6 +257,7 @@ class WorldServer:
         self.stats.started_s = time.perf_counter()
         period = world.config.tick_s
         next_tick_at = time.monotonic()
+        next_checkpoint_at = time.monotonic() + self.checkpoint_every_s
         while not world.done and not self._stop.is_set():
             t0 = time.perf_counter()
             with self._cond:
@@ -281,6 +289,9 @@ class WorldServer:
             self.stats.tick_durations_s.append(time.perf_counter() - t0)
             if world.tick % self.state_every_ticks == 0 or world.done:
                 self._publish_state()
+            if self.checkpoint is not None and time.monotonic() >= next_checkpoint_at:
+                self.checkpoint(self.snapshot("running"))
+                next_checkpoint_at = time.monotonic() + self.checkpoint_every_s
             if self.realtime:
                 next_tick_at += period
                 pause = next_tick_at - time.monotonic()
@@ -299,14 +310,19 @@ class WorldServer:
         )
         self._state_pub.put(encode(state))
 
-    def finish(self, reason: str) -> dict:
-        result = {
+    def snapshot(self, reason: str) -> dict:
+        """The run's figures so far."""
+        return {
             "reason": reason,
+            "tick": self.world.tick,
             "metrics": self.world.metrics.summary(),
             "transport": self.stats.summary(),
             "rejected": dict(self.errors.counts),
             "dead_robots": np.flatnonzero(~self.world.alive).tolist(),
         }
+
+    def finish(self, reason: str) -> dict:
+        result = self.snapshot(reason)
         self._end_pub.put(encode(RunEnd(tick=self.world.tick, reason=reason, metrics=_plain(result))))
         return result
 
