@@ -332,3 +332,46 @@ def test_sigterm_ends_each_piece_within_a_second(tmp_path):
     assert agent_codes == [0, 0]
     recorded = json.loads((swarm.out / "results.json").read_text())
     assert recorded["reason"] == "stopped" and recorded["tick"] > 0
+
+
+def test_router_restart_mid_run_and_the_run_completes(tmp_path):
+    """Multi-host topology (every piece a client of one router): the router dies mid-run and
+    comes back on the same endpoint; world and agents reconnect and the run completes."""
+    from swarmloc.deploy.launch import start_announcing
+
+    _, path = _scenario(tmp_path, ["world.robots=3", "world.duration_s=300.0"])
+    run = "r" + uuid.uuid4().hex[:10]
+    keys = Keys(run)
+    states: list[WorldState] = []
+    started, after_restart = threading.Event(), threading.Event()
+    with supervised() as sup:
+        router, endpoint = start_announcing(sup, ["router", "-l", "tcp/127.0.0.1:0", "--announce"],
+                                            log_path=tmp_path / "router.log")
+        transport = ["-m", "client", "-e", endpoint, "--run", run]
+        world = sup.start(["world", str(path), *transport, "--out", str(tmp_path / "out"),
+                           "--act-timeout-s", "30"], log_path=tmp_path / "world.log")
+        for i in range(3):
+            sup.start(["agent", "--robot", str(i), *transport], log_path=tmp_path / f"agent-{i}.log")
+        with _client(endpoint) as session:
+
+            def on_state(sample):
+                s = decode(sample.payload.to_bytes(), WorldState)
+                states.append(s)
+                started.set()
+                if restarted.is_set():
+                    after_restart.set()
+
+            restarted = threading.Event()
+            session.declare_subscriber(keys.world_state, on_state)
+            assert started.wait(60), "the run never started"
+            router.send_signal(signal.SIGKILL)
+            router.wait(timeout=10)
+            # The same endpoint again (the port is free once the old router is gone).
+            start_announcing(sup, ["router", "-l", endpoint, "--announce"],
+                             log_path=tmp_path / "router2.log")
+            restarted.set()
+            assert after_restart.wait(60), "no world state after the router came back"
+            assert world.wait(timeout=120) == 0, "the run did not complete"
+    result = json.loads((tmp_path / "out" / "results.json").read_text())
+    assert result["reason"] == "completed" and result["transport"]["ticks"] == 3000
+    assert all(all(s.alive) for s in states[-3:]), "every robot is back by the end of the run"

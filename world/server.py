@@ -250,6 +250,22 @@ class WorldServer:
                     break
                 self._cond.wait(left)
 
+    def _await_any_agent(self) -> bool:
+        """With no live agent nothing can happen in the run: pause (e.g. while the router
+        restarts) until one is back, up to ``join_timeout_s``; False if none came back."""
+        with self._cond:
+            if self._live.any() or self._stop.is_set():
+                return True
+            log.warning("no agent alive: the world waits for agents (up to %.0f s)", self.join_timeout_s)
+            deadline = time.monotonic() + self.join_timeout_s
+            while not self._live.any() and not self._stop.is_set():
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    return False
+                self._cond.wait(min(left, 0.5))
+            log.warning("agents are back; the run goes on")
+            return True
+
     def run(self) -> dict:
         """Run the whole scenario; return the metrics and the run's figures."""
         world = self.world
@@ -259,6 +275,8 @@ class WorldServer:
         next_tick_at = time.monotonic()
         next_checkpoint_at = time.monotonic() + self.checkpoint_every_s
         while not world.done and not self._stop.is_set():
+            if not self._await_any_agent():
+                return self.finish("agents gone")
             t0 = time.perf_counter()
             with self._cond:
                 # A robot whose agent died stands still; one whose agent came back moves again.
