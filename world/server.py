@@ -275,8 +275,11 @@ class WorldServer:
         next_tick_at = time.monotonic()
         next_checkpoint_at = time.monotonic() + self.checkpoint_every_s
         while not world.done and not self._stop.is_set():
+            before = time.monotonic()
             if not self._await_any_agent():
                 return self.finish("agents gone")
+            if time.monotonic() - before > period:
+                next_tick_at = time.monotonic()  # real time resumes from now, no catch-up burst
             t0 = time.perf_counter()
             with self._cond:
                 # A robot whose agent died stands still; one whose agent came back moves again.
