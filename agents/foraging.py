@@ -30,11 +30,13 @@ import msgpack
 import numpy as np
 
 from swarmloc.agents.social_odometry import STRATEGIES, fuse, transform_received
-from swarmloc.protocol.epuck import (
-    GROUND_SENSOR_OFFSETS_M,
+from swarmloc.protocol.epuck import (  # noqa: F401 -- on_path is part of this module's API
     IR_SENSOR_ANGLES_RAD,
+    STATE_KNOWS_BOTH,
     EpuckBody,
+    ground_sensor_point,
     integrate_pose,
+    on_path,
     propagate_covariance,
     wrap_angle,
 )
@@ -49,10 +51,9 @@ def agent_rng(seed: int, robot_id: int) -> np.random.Generator:
     """Each agent's own generator, derived from the run seed and its robot id."""
     return np.random.default_rng([seed, AGENT_STREAM, robot_id])
 
-#: Controller state codes reported in every Act: bits 0-1 the target (0 none = wander,
-#: 1 nest, 2 prey), bit 2 set when the robot knows both areas.
+#: Controller state codes reported in every Act (the contract is in protocol/epuck.py).
 TARGET_NONE, TARGET_NEST, TARGET_PREY = 0, 1, 2
-KNOWS_BOTH = 4
+KNOWS_BOTH = STATE_KNOWS_BOTH
 
 # Ground perception: reflectance bands of seed 000 §6.1 (black nest, grey prey, white floor,
 # each with +-30 % noise) are disjoint; the thresholds sit between them.
@@ -61,17 +62,8 @@ GROUND_GREY_BELOW = 0.68
 
 _XY_BLOCK = np.diag([1.0, 1.0, 0.0])
 
-#: Where the middle ground sensor sits ahead of the body centre (m).
-GROUND_SENSOR_M = float(GROUND_SENSOR_OFFSETS_M[1, 0])
-
 _COS_IR = np.cos(IR_SENSOR_ANGLES_RAD)
 _SIN_IR = np.sin(IR_SENSOR_ANGLES_RAD)
-
-
-def on_path(state: np.ndarray) -> np.ndarray:
-    """Robots that forage between the two areas (seed 000 §6.1.3): a target and both known."""
-    state = np.asarray(state)
-    return ((state & 3) != TARGET_NONE) & ((state & KNOWS_BOTH) != 0)
 
 
 def classify_ground(ground: np.ndarray) -> np.ndarray:
@@ -380,9 +372,7 @@ class ForagingBrain:
         if not (area >= 0).any():  # the common case: nobody stands on an area
             self.visit_ticks.fill(0)
             return
-        sensor = self.pose[:, :2] + GROUND_SENSOR_M * np.stack(
-            (np.cos(self.pose[:, 2]), np.sin(self.pose[:, 2])), axis=1
-        )
+        sensor = ground_sensor_point(self.pose)
         for goal in (NEST, PREY):
             inside = area == goal
             entering = inside & (self.visit_ticks[:, goal] == 0)

@@ -54,7 +54,7 @@ def load_from_args(args):
     """The scenario named by the arguments, with every override applied and validated."""
     import json as _json
 
-    from swarmloc.deploy.scenario import Scenario, load_scenario
+    from swarmloc.deploy.scenario import load_scenario
 
     overrides = list(args.set)
     if args.scenario is None:
@@ -67,14 +67,6 @@ def load_from_args(args):
         value = getattr(args, flag, None)
         if value is not None:
             overrides.append(f"{key}={_json.dumps(value)}")
-    if str(args.scenario).endswith(".json"):
-        from swarmloc.config import apply_overrides
-
-        try:
-            data = _json.loads(Path(args.scenario).read_text())
-        except (OSError, ValueError) as exc:
-            raise ConfigError(f"{args.scenario}: cannot read scenario: {exc}") from None
-        return Scenario.from_dict(apply_overrides(data, overrides))
     return load_scenario(args.scenario, overrides)
 
 

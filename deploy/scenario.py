@@ -10,6 +10,7 @@ starts.
 from __future__ import annotations
 
 import dataclasses
+import json
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -47,6 +48,11 @@ def builtin_names() -> list[str]:
 def scenario_data(name_or_path: str) -> dict:
     """The raw dict of a shipped scenario (by name) or of a TOML file (by path)."""
     path = Path(name_or_path)
+    if path.suffix == ".json":  # what a run folder records (scenario.json)
+        try:
+            return json.loads(path.read_text())
+        except (OSError, ValueError) as exc:
+            raise ConfigError(f"{path}: cannot read scenario: {exc}") from None
     if path.suffix == ".toml" or path.exists():
         return load_toml(path)
     names = builtin_names()

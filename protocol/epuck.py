@@ -29,6 +29,25 @@ IR_SENSOR_ANGLES_RAD = np.deg2rad(np.array([-17.0, -49.0, -90.0, -150.0, 150.0, 
 GROUND_SENSOR_OFFSETS_M = np.array([[0.030, 0.010], [0.030, 0.0], [0.030, -0.010]])
 
 
+#: Controller state codes an agent reports in every Act (bits 0-1: its target, 0 none = wander,
+#: 1 nest, 2 prey; bit 2: it knows both areas). The world reads them for the stability metric.
+STATE_TARGET_MASK = 3
+STATE_KNOWS_BOTH = 4
+
+
+def on_path(state: np.ndarray) -> np.ndarray:
+    """Robots that forage between the two areas (seed 000 §6.1.3): a target and both known."""
+    state = np.asarray(state)
+    return ((state & STATE_TARGET_MASK) != 0) & ((state & STATE_KNOWS_BOTH) != 0)
+
+
+def ground_sensor_point(pose: np.ndarray) -> np.ndarray:
+    """Where the middle ground sensor of each robot is, ``(N, 2)``: what "standing on an area"
+    means, for the world's metrics and the agent's stored goal locations alike."""
+    ahead = GROUND_SENSOR_OFFSETS_M[1, 0]
+    return pose[:, :2] + ahead * np.stack((np.cos(pose[:, 2]), np.sin(pose[:, 2])), axis=1)
+
+
 @dataclass(frozen=True)
 class EpuckBody:
     """Physical constants of an e-puck (seed 000 §3.1, §6.1)."""

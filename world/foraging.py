@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from swarmloc.protocol.epuck import GROUND_SENSOR_OFFSETS_M, EpuckBody, integrate_pose
+from swarmloc.protocol.epuck import EpuckBody, ground_sensor_point, integrate_pose
 from swarmloc.protocol.messages import MAX_RAB_PAYLOAD_BYTES, MAX_RECEIVED
 from swarmloc.world.arena import Arena, Disc, area_at, resolve_collisions
 from swarmloc.world.medium import Deliveries, RabMedium, deliver
@@ -212,8 +212,7 @@ class ForagingWorld:
         self.encoder_steps = encoder
         self.tick += 1
         # A robot is at an area when its (middle) ground sensor truly is over it.
-        ahead = GROUND_SENSOR_OFFSETS_M[1, 0]
-        sensor = pose[:, :2] + ahead * np.stack((np.cos(pose[:, 2]), np.sin(pose[:, 2])), axis=1)
+        sensor = ground_sensor_point(pose)
         self.metrics.update(self.tick, area_at(sensor, self.arena), on_path & self.alive)
 
     def kill(self, index: int) -> None:

@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import zenoh
 
+from swarmloc.protocol.epuck import on_path
 from swarmloc.protocol.errors import ErrorCounter
 from swarmloc.protocol.keys import Keys
 from swarmloc.protocol.messages import (
@@ -44,8 +45,6 @@ from swarmloc.world.foraging import ForagingWorld
 
 log = logging.getLogger("swarmloc.world")
 
-#: State codes an agent reports; the world only needs "on the path" for the stability metric.
-_TARGET_MASK, _KNOWS_BOTH = 3, 4
 
 
 @dataclass
@@ -304,8 +303,8 @@ class WorldServer:
                 self.stats.late_acts += int((~self._got & world.alive & self._live).sum())
                 cmd = self._cmd.copy()  # a missing act keeps the previous command
                 sending = self._sending & self._got
-                on_path = ((self._state & _TARGET_MASK) != 0) & ((self._state & _KNOWS_BOTH) != 0)
-            world.step(cmd, sending, on_path)
+                foraging = on_path(self._state)
+            world.step(cmd, sending, foraging)
             self.stats.ticks += 1
             self.stats.tick_durations_s.append(time.perf_counter() - t0)
             if world.tick % self.state_every_ticks == 0 or world.done:
