@@ -18,26 +18,15 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("MKL_NUM_THREADS", "1")
 
-import time
 
 import numpy as np
+from _timing import median_ms
 
 from swarmloc.world.laser import cast_rays
 from swarmloc.world.maps import free_space_sample, office_map
 
 CASES = ((300, 18), (5000, 18), (5000, 36))
 MAX_RANGE_M = 8.0
-
-
-def _time_ms(fn, min_time_s: float = 1.0, min_calls: int = 10) -> float:
-    """Median wall time of one call, in ms (the median resists other load on the machine)."""
-    fn()  # warm-up
-    times, t_start = [], time.perf_counter()
-    while len(times) < min_calls or time.perf_counter() - t_start < min_time_s:
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return float(np.median(times)) * 1e3
 
 
 def main() -> int:
@@ -50,7 +39,7 @@ def main() -> int:
     for n_poses, n_beams in CASES:
         poses = free_space_sample(world, n_poses, rng)
         beams = np.arange(n_beams) * (2.0 * np.pi / n_beams)
-        ms = _time_ms(lambda p=poses, b=beams: cast_rays(world, p, b, MAX_RANGE_M))
+        ms = median_ms(lambda p=poses, b=beams: cast_rays(world, p, b, MAX_RANGE_M))
         rate = 1e3 / ms
         print(
             f"  {n_poses:5d} poses x {n_beams:2d} beams = {n_poses * n_beams:7d} rays: "

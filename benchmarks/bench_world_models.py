@@ -10,9 +10,9 @@ Usage: python benchmarks/bench_world_models.py
 from __future__ import annotations
 
 import math
-import time
 
 import numpy as np
+from _timing import median_ms
 
 from swarmloc.protocol.epuck import EpuckBody
 from swarmloc.world.arena import Arena, Disc, area_at, resolve_collisions
@@ -20,17 +20,7 @@ from swarmloc.world.medium import RabMedium, deliver
 from swarmloc.world.sensors import SensorParams, ground_sensors, ir_proximity
 
 AREA_PER_ROBOT_M2 = 0.05
-
-
-def _time_ms(fn, min_time_s: float = 0.3, min_calls: int = 5) -> float:
-    """Median wall time of one call, in ms (the median resists other load on the machine)."""
-    fn()  # warm-up
-    times, t_start = [], time.perf_counter()
-    while len(times) < min_calls or time.perf_counter() - t_start < min_time_s:
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return float(np.median(times)) * 1e3
+QUICK = {"min_time_s": 0.3, "min_calls": 5}  # measuring time per call
 
 
 def main() -> None:
@@ -57,11 +47,11 @@ def main() -> None:
         pose[:, :2] = resolve_collisions(pose[:, :2], r_m, arena, iterations=4)
         sending = np.ones(n, dtype=bool)
         xy = pose[:, :2].copy()
-        t_ir = _time_ms(lambda p=pose, a=arena, g=rng: ir_proximity(p, r_m, a, params, g))
-        t_gr = _time_ms(lambda p=pose, a=arena, g=rng: ground_sensors(p, a, params, g))
-        t_rab = _time_ms(lambda p=pose, s=sending, g=rng: deliver(p, s, medium, g))
-        t_col = _time_ms(lambda q=xy, a=arena: resolve_collisions(q, r_m, a))
-        t_area = _time_ms(lambda q=xy, a=arena: area_at(q, a))
+        t_ir = median_ms(lambda p=pose, a=arena, g=rng: ir_proximity(p, r_m, a, params, g), **QUICK)
+        t_gr = median_ms(lambda p=pose, a=arena, g=rng: ground_sensors(p, a, params, g), **QUICK)
+        t_rab = median_ms(lambda p=pose, s=sending, g=rng: deliver(p, s, medium, g), **QUICK)
+        t_col = median_ms(lambda q=xy, a=arena: resolve_collisions(q, r_m, a), **QUICK)
+        t_area = median_ms(lambda q=xy, a=arena: area_at(q, a), **QUICK)
         total = t_ir + t_gr + t_rab + t_col + t_area
         print(
             f"{n:>6} {side_m:>7.2f} {t_ir:>13.3f} {t_gr:>8.3f} {t_rab:>8.3f} {t_col:>11.3f} "
