@@ -62,6 +62,34 @@ def _client(endpoint):
     return open_session(session_config(mode="client", connect=[endpoint]))
 
 
+class WorldWatch:
+    """A client that follows a run's world states (the tests' readiness signal and record)."""
+
+    def __init__(self, endpoint: str, keys: Keys):
+        self.session = _client(endpoint)
+        self.states: list[WorldState] = []
+        self._cond = threading.Condition()
+        self.session.declare_subscriber(keys.world_state, self._on_state)
+
+    def _on_state(self, sample):
+        state = decode(sample.payload.to_bytes(), WorldState)
+        with self._cond:
+            self.states.append(state)
+            self._cond.notify_all()
+
+    def wait_for(self, predicate=lambda s: True, timeout_s: float = 60.0, since: int = 0) -> bool:
+        """Whether a state from index ``since`` on satisfies ``predicate`` within the timeout."""
+        with self._cond:
+            return self._cond.wait_for(
+                lambda: any(predicate(x) for x in self.states[since:]), timeout_s)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.session.close()
+
+
 def test_process_run_matches_batch_engine(tmp_path):
     scenario, path = _scenario(tmp_path, ["world.robots=4", "world.duration_s=40.0", "world.seed=7"])
     with supervised() as sup:
@@ -78,24 +106,13 @@ def test_process_run_matches_batch_engine(tmp_path):
 
 def test_killed_agent_stands_still_and_run_goes_on(tmp_path):
     _, path = _scenario(tmp_path, ["world.robots=4", "world.duration_s=120.0"])
-    states: list[WorldState] = []
-    got_state = threading.Event()
-    killed_seen = threading.Event()
     with supervised() as sup:
         swarm = Swarm(sup, tmp_path, path, robots=4)
-        with _client(swarm.endpoint) as session:
-
-            def on_state(sample):
-                s = decode(sample.payload.to_bytes(), WorldState)
-                states.append(s)
-                got_state.set()
-                if not s.alive[2]:
-                    killed_seen.set()
-
-            session.declare_subscriber(swarm.keys.world_state, on_state)
-            assert got_state.wait(60), "the run never started"
+        with WorldWatch(swarm.endpoint, swarm.keys) as watch:
+            states = watch.states
+            assert watch.wait_for(), "the run never started"
             os.kill(swarm.agents[2].pid, signal.SIGKILL)
-            assert killed_seen.wait(30), "the world never noticed the dead agent"
+            assert watch.wait_for(lambda x: not x.alive[2], 30), "the world never noticed the dead agent"
             result = swarm.results()
     assert result["reason"] == "completed"
     assert result["dead_robots"] == [2]
@@ -113,12 +130,11 @@ def test_killed_agent_stands_still_and_run_goes_on(tmp_path):
 
 def test_bad_messages_are_rejected_counted_and_change_nothing(tmp_path):
     scenario, path = _scenario(tmp_path, ["world.robots=3", "world.duration_s=60.0", "world.seed=3"])
-    got_state = threading.Event()
     with supervised() as sup:
         swarm = Swarm(sup, tmp_path, path, robots=3)
-        with _client(swarm.endpoint) as session:
-            session.declare_subscriber(swarm.keys.world_state, lambda s: got_state.set())
-            assert got_state.wait(60), "the run never started"
+        with WorldWatch(swarm.endpoint, swarm.keys) as watch:
+            session = watch.session
+            assert watch.wait_for(), "the run never started"
             k = swarm.keys
             good = EpuckAct(tick=10**9, robot_id=1, wheel_speed_steps_s=(0.0, 0.0), payload=None,
                             state=0, pose_estimate=(0.0, 0.0, 0.0))
@@ -250,29 +266,19 @@ def test_sigterm_to_swarmloc_run_stops_every_piece(tmp_path):
 
 def test_restarted_agent_rejoins_its_robot(tmp_path):
     _, path = _scenario(tmp_path, ["world.robots=3", "world.duration_s=300.0"])
-    states: list[WorldState] = []
-    started, dead_seen, back_seen = threading.Event(), threading.Event(), threading.Event()
     with supervised() as sup:
         swarm = Swarm(sup, tmp_path, path, robots=3)
-        with _client(swarm.endpoint) as session:
-
-            def on_state(sample):
-                s = decode(sample.payload.to_bytes(), WorldState)
-                states.append(s)
-                started.set()
-                if not s.alive[1]:
-                    dead_seen.set()
-                elif dead_seen.is_set():
-                    back_seen.set()
-
-            session.declare_subscriber(swarm.keys.world_state, on_state)
-            assert started.wait(60), "the run never started"
+        with WorldWatch(swarm.endpoint, swarm.keys) as watch:
+            states = watch.states
+            assert watch.wait_for(), "the run never started"
             os.kill(swarm.agents[1].pid, signal.SIGKILL)
-            assert dead_seen.wait(60), "the world never noticed the dead agent"
+            assert watch.wait_for(lambda x: not x.alive[1]), "the world never noticed the dead agent"
+            dead_at = next(i for i, x in enumerate(states) if not x.alive[1])
             # The same robot's agent again, as an operator would restart it.
             sup.start(["agent", "--robot", "1", "-m", "client", "-e", swarm.world_endpoint,
                        "--run", swarm.run], log_path=tmp_path / "agent-1-again.log")
-            assert back_seen.wait(60), "the restarted agent did not get its robot back"
+            assert watch.wait_for(lambda x: x.alive[1], since=dead_at), (
+                "the restarted agent did not get its robot back")
             result = swarm.results()
     assert result["reason"] == "completed" and result["dead_robots"] == []
     revived = [s for s in states if s.alive[1] and s.tick > min(t.tick for t in states if not t.alive[1])]
@@ -284,12 +290,10 @@ def test_agents_exit_cleanly_when_the_world_dies_and_its_results_so_far_are_inta
     import time
 
     _, path = _scenario(tmp_path, ["world.robots=3", "world.duration_s=6000.0"])
-    started = threading.Event()
     with supervised() as sup:
         swarm = Swarm(sup, tmp_path, path, robots=3, world_args=("--checkpoint-s", "0.5"))
-        with _client(swarm.endpoint) as session:
-            session.declare_subscriber(swarm.keys.world_state, lambda s: started.set())
-            assert started.wait(60), "the run never started"
+        with WorldWatch(swarm.endpoint, swarm.keys) as watch:
+            assert watch.wait_for(), "the run never started"
             results = swarm.out / "results.json"
             deadline = time.monotonic() + 30
             while not results.exists():  # the first checkpoint: bounded polling of a file
@@ -311,13 +315,11 @@ def test_sigterm_ends_each_piece_within_a_second(tmp_path):
     import time
 
     _, path = _scenario(tmp_path, ["world.robots=2", "world.duration_s=6000.0"])
-    started = threading.Event()
     with supervised() as sup:
         swarm = Swarm(sup, tmp_path, path, robots=2)
         router = sup.procs[0]
-        with _client(swarm.endpoint) as session:
-            session.declare_subscriber(swarm.keys.world_state, lambda s: started.set())
-            assert started.wait(60), "the run never started"
+        with WorldWatch(swarm.endpoint, swarm.keys) as watch:
+            assert watch.wait_for(), "the run never started"
             t0 = time.monotonic()
             swarm.world.send_signal(signal.SIGTERM)
             assert swarm.world.wait(timeout=10) == 4  # stopped before the end of the run
@@ -342,8 +344,6 @@ def test_router_restart_mid_run_and_the_run_completes(tmp_path):
     _, path = _scenario(tmp_path, ["world.robots=3", "world.duration_s=300.0"])
     run = "r" + uuid.uuid4().hex[:10]
     keys = Keys(run)
-    states: list[WorldState] = []
-    started, after_restart = threading.Event(), threading.Event()
     with supervised() as sup:
         router, endpoint = start_announcing(sup, ["router", "-l", "tcp/127.0.0.1:0", "--announce"],
                                             log_path=tmp_path / "router.log")
@@ -352,25 +352,16 @@ def test_router_restart_mid_run_and_the_run_completes(tmp_path):
                            "--act-timeout-s", "30"], log_path=tmp_path / "world.log")
         for i in range(3):
             sup.start(["agent", "--robot", str(i), *transport], log_path=tmp_path / f"agent-{i}.log")
-        with _client(endpoint) as session:
-
-            def on_state(sample):
-                s = decode(sample.payload.to_bytes(), WorldState)
-                states.append(s)
-                started.set()
-                if restarted.is_set():
-                    after_restart.set()
-
-            restarted = threading.Event()
-            session.declare_subscriber(keys.world_state, on_state)
-            assert started.wait(60), "the run never started"
+        with WorldWatch(endpoint, keys) as watch:
+            states = watch.states
+            assert watch.wait_for(), "the run never started"
             router.send_signal(signal.SIGKILL)
             router.wait(timeout=10)
             # The same endpoint again (the port is free once the old router is gone).
             start_announcing(sup, ["router", "-l", endpoint, "--announce"],
                              log_path=tmp_path / "router2.log")
-            restarted.set()
-            assert after_restart.wait(60), "no world state after the router came back"
+            seen_before = len(states)
+            assert watch.wait_for(since=seen_before), "no world state after the router came back"
             assert world.wait(timeout=120) == 0, "the run did not complete"
     result = json.loads((tmp_path / "out" / "results.json").read_text())
     assert result["reason"] == "completed" and result["transport"]["ticks"] == 3000
