@@ -9,7 +9,6 @@ and over processes.
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -50,28 +49,15 @@ class BatchResult:
     lost_count: np.ndarray
 
 
-def run_batch(
-    scenario: Scenario,
-    *,
-    on_tick: Callable[[int, ForagingWorld], None] | None = None,
-    kill_at: dict[int, int] | None = None,
-) -> BatchResult:
-    """Run one seeded replication to the end. ``kill_at`` maps robot index to the tick at which
-    its agent dies (for comparison with process runs)."""
+def run_batch(scenario: Scenario) -> BatchResult:
+    """Run one seeded replication to the end."""
     world = ForagingWorld(scenario.world)
-    n = world.n_robots
-    ids = np.arange(n)
-    brain = swarm_brain(scenario, ids)
-    kill_at = kill_at or {}
+    brain = swarm_brain(scenario)
+    ids = brain.robot_ids
     sent: BrainOutput | None = None
     while not world.done:
-        for index, tick in kill_at.items():
-            if tick == world.tick:
-                world.kill(index)
         obs = world.observe()
         out = brain.step(obs.encoder_steps, obs.ir, obs.ground, inbox_from(obs, sent, ids))
         world.step(out.wheel_speed_steps_s, out.sending, on_path(out.state))
         sent = out
-        if on_tick is not None:
-            on_tick(world.tick, world)
     return BatchResult(world.metrics.summary(), world.pose.copy(), brain.pose.copy(), brain.lost_count)

@@ -9,7 +9,6 @@ starts.
 
 from __future__ import annotations
 
-import dataclasses
 import json
 from dataclasses import dataclass, field
 from importlib import resources
@@ -36,8 +35,6 @@ class Scenario:
     def from_dict(cls, data: dict) -> Scenario:
         return from_dict(cls, data)
 
-    def replace(self, **world_changes) -> Scenario:
-        return dataclasses.replace(self, world=dataclasses.replace(self.world, **world_changes))
 
 
 def builtin_names() -> list[str]:
