@@ -184,6 +184,7 @@ def main_agent(args) -> int:
 
 def main_batch(args) -> int:
     from swarmloc.deploy.batch import run_batch
+    from swarmloc.deploy.run import print_metrics
 
     scenario = load_from_args(args)
     t0 = time.perf_counter()
@@ -194,7 +195,7 @@ def main_batch(args) -> int:
     if args.json:
         print(json.dumps(summary))
     else:
-        _print_metrics(summary)
+        print_metrics(summary)
     return 0
 
 
@@ -204,18 +205,6 @@ def main_run(args) -> int:
     scenario = load_from_args(args)
     return run_local(scenario, run_name=args.run, out_root=Path(args.out), realtime=args.realtime,
                      quiet=args.quiet, join_timeout_s=args.join_timeout_s)
-
-
-def _print_metrics(summary: dict) -> None:
-    m = summary["metrics"]
-    n = summary["robots"]
-    recruit = m.get("recruitment_time_s")
-    print(f"scenario {summary['scenario']}  strategy {summary['strategy']}  seed {summary['seed']}  robots {n}")
-    print(f"  robots that found both areas : {m['robots_found_both']}/{n}")
-    print(f"  recruitment time (all robots): {f'{recruit:.1f} s' if recruit is not None else 'not reached'}")
-    print(f"  round trips nest-prey-nest   : {m['round_trips_total']}")
-    frac = m.get("on_path_fraction_mean")
-    print(f"  robots on the path (2nd half): {'%.0f %%' % (100 * frac) if frac is not None else '-'}")
 
 
 # -- parsing ----------------------------------------------------------------------------------

@@ -100,6 +100,19 @@ def start_swarm(sup: Supervisor, scenario_file: Path, *, run: str, robots: int, 
     return LocalSwarm(endpoint, world, world_endpoint, agents)
 
 
+def print_metrics(summary: dict) -> None:
+    """The foraging metrics of seed 000 §6, as the end of a run prints them."""
+    m = summary["metrics"]
+    n = summary["robots"]
+    recruit = m.get("recruitment_time_s")
+    print(f"scenario {summary['scenario']}  strategy {summary['strategy']}  seed {summary['seed']}  robots {n}")
+    print(f"  robots that found both areas : {m['robots_found_both']}/{n}")
+    print(f"  recruitment time (all robots): {f'{recruit:.1f} s' if recruit is not None else 'not reached'}")
+    print(f"  round trips nest-prey-nest   : {m['round_trips_total']}")
+    frac = m.get("on_path_fraction_mean")
+    print(f"  robots on the path (2nd half): {'%.0f %%' % (100 * frac) if frac is not None else '-'}")
+
+
 def run_local(scenario: Scenario, *, run_name: str | None, out_root: Path, realtime: bool,
               quiet: bool, join_timeout_s: float = 180.0) -> int:
     w = scenario.world
@@ -135,9 +148,7 @@ def run_local(scenario: Scenario, *, run_name: str | None, out_root: Path, realt
         print(f"swarmloc: the world-server failed (exit {code}); see {log_dir / 'world.log'}", file=sys.stderr)
         return 1
     result = json.loads(results_file.read_text())
-    from swarmloc.deploy.cli import _print_metrics
-
-    _print_metrics(result)
+    print_metrics(result)
     t = result["transport"]
     print(f"  transport                    : {t['ticks']} ticks in {t['wall_s']} s = {t['ticks_per_s']} ticks/s "
           f"(tick p50 {t['tick_ms_p50']} ms, p99 {t['tick_ms_p99']} ms)")
