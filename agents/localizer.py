@@ -1,0 +1,98 @@
+"""The contract every map-based localizer of the laser robots follows (seeds 002 and 003).
+
+One localizer instance is one robot's brain: MR-SSGA, CFS-GA, the simple GA and the AMCL-style
+particle filter all implement :class:`Localizer`, so that the same object runs inside an agent
+process (fed by the world-server over Zenoh) and inside the in-process runner (fed by the laser
+world directly). A localizer is a pure model: no Zenoh, no clock, no global random state; it gets
+its own ``numpy.random.Generator`` when it is built.
+
+Each step the robot receives a :class:`LaserObservation`:
+
+- its odometry increments since the last step (eq. 3 of 002: ``delta_s``, ``delta_phi``);
+- its laser ranges (eq. 4 of 002), ``L`` beams spread over 360 deg from the heading;
+- the teammates it sees (:class:`Sighting`: noisy distance, bearing and relative heading of a
+  robot within range and line of sight, 002 §3.2, 003 §IV-B);
+- the radio messages teammates broadcast at the previous step (:class:`RadioMessage`), delivered
+  by the world's radio medium (range, line of sight, loss). Their payload is opaque bytes built by
+  the sender's :meth:`Localizer.outgoing`; each algorithm owns its codec and must reject a payload
+  it cannot decode with ``ValueError`` (the shell counts it and goes on).
+
+After :meth:`Localizer.step` the robot reports :meth:`Localizer.estimate` (its best pose) and may
+broadcast :meth:`Localizer.outgoing` (at most :data:`MAX_RADIO_PAYLOAD_BYTES`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+#: Upper bound on one radio payload (a CFS-GA robot sends its above-average individuals, an
+#: MR-SSGA robot its scan and best pose): 32 KiB is far above what any of them needs.
+MAX_RADIO_PAYLOAD_BYTES = 32 * 1024
+
+
+@dataclass(frozen=True)
+class Sighting:
+    """Teammate ``robot_id`` as this robot measures it (noisy): distance, the bearing of the
+    teammate in this robot's frame, and the teammate's heading minus this robot's heading."""
+
+    robot_id: int
+    distance_m: float
+    bearing_rad: float
+    relative_heading_rad: float
+
+
+@dataclass(frozen=True)
+class RadioMessage:
+    """A payload teammate ``sender_id`` broadcast at the previous step."""
+
+    sender_id: int
+    payload: bytes
+
+
+@dataclass(frozen=True)
+class LaserObservation:
+    """What one laser robot gets at one step."""
+
+    step: int
+    odometry_delta_s_m: float
+    odometry_delta_phi_rad: float
+    ranges_m: np.ndarray  #: (L,) laser ranges, beam j at heading + j * 2 pi / L
+    sightings: tuple[Sighting, ...] = ()
+    received: tuple[RadioMessage, ...] = ()
+
+
+@dataclass(frozen=True)
+class LocalizerSetup:
+    """What every localizer is built from: the robot's id, the map name (see
+    ``swarmloc.world.maps``), its laser, and the parameters of its motion and relative
+    observations (``swarmloc.world.laser``). Algorithm parameters come separately."""
+
+    robot_id: int
+    map_name: str
+    n_beams: int
+    max_range_m: float
+    laser_noise_std_m: float
+    speed_std_mps: float
+    turn_rate_std_rad_s: float
+    relative_distance_std_m: float
+    relative_orientation_std_rad: float
+    dt_s: float = 1.0
+    cooperative: bool = True
+    extra: dict = field(default_factory=dict)
+
+
+@runtime_checkable
+class Localizer(Protocol):
+    """One robot's map-based localizer."""
+
+    def step(self, obs: LaserObservation) -> None:
+        """Apply the odometry, then the laser and the teammates' data of this step."""
+
+    def estimate(self) -> np.ndarray:
+        """The best pose estimate ``(x_m, y_m, theta_rad)``, shape (3,)."""
+
+    def outgoing(self) -> bytes | None:
+        """What to broadcast to teammates after this step (None: nothing)."""
