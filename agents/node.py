@@ -1,6 +1,7 @@
 """The agent node: one robot's brain in its own process, over Zenoh.
 
-A thin shell around :class:`ForagingBrain` with a batch of one:
+A thin shell around an :class:`~swarmloc.agents.brains.AgentBrain` (the e-puck foraging brain
+with a batch of one, a laser localizer, ...), chosen by the scenario the world sends:
 
 1. join: query ``world/join`` with a ``Join``; the world answers with the scenario and run seed;
 2. subscribe to this robot's ``sense`` key, then declare its liveliness token (the world waits
@@ -10,7 +11,7 @@ A thin shell around :class:`ForagingBrain` with a batch of one:
    been gone for ``world_grace_s`` (a world restarting within that time is waited for), or when
    no Sense came for ``world_timeout_s``; close the session on the way out.
 
-A malformed Sense, or a neighbour's malformed payload inside a valid Sense, is rejected, counted
+A malformed Sense, or a teammate's malformed payload inside a valid Sense, is rejected, counted
 and logged once; the agent keeps running.
 """
 
@@ -21,17 +22,12 @@ import os
 import threading
 import time
 
-import numpy as np
 import zenoh
 
-from swarmloc.agents.foraging import AgentConfig, ForagingBrain, Inbox, SocialMessages, agent_rng
-from swarmloc.config import ConfigError, from_dict
-from swarmloc.protocol.epuck import EpuckBody
+from swarmloc.agents.brains import AgentBrain, BrainError, brain_from_welcome
 from swarmloc.protocol.errors import ErrorCounter
 from swarmloc.protocol.keys import Keys
 from swarmloc.protocol.messages import (
-    EpuckAct,
-    EpuckSense,
     ErrorReport,
     Join,
     ProtocolError,
@@ -56,7 +52,7 @@ class JoinError(RuntimeError):
 def join(session: zenoh.Session, keys: Keys, robot_id: int, timeout_s: float) -> Welcome:
     """Ask the world for our scenario, retrying until ``timeout_s`` (the world may start later)."""
     deadline = time.monotonic() + timeout_s
-    request = encode(Join(robot_id=robot_id, brain="foraging", pid=os.getpid()))
+    request = encode(Join(robot_id=robot_id, brain="auto", pid=os.getpid()))
     while True:
         for reply in session.get(keys.join, payload=request, timeout=2.0):
             if reply.ok is None:
@@ -70,21 +66,8 @@ def join(session: zenoh.Session, keys: Keys, robot_id: int, timeout_s: float) ->
         time.sleep(0.2)  # retry pacing for a world not started yet, not a readiness wait
 
 
-def brain_from_welcome(welcome: Welcome) -> ForagingBrain:
-    scenario = welcome.scenario
-    try:
-        config = from_dict(AgentConfig, scenario.get("agent", {}), "agent")
-        world = scenario.get("world", {})
-        body = from_dict(EpuckBody, world.get("body", {}), "world.body")
-        tick_s = float(world.get("tick_s", 0.1))
-    except (ConfigError, AttributeError, TypeError, ValueError) as exc:
-        raise JoinError(f"the world's scenario is not usable: {exc}") from None
-    rid = welcome.robot_id
-    return ForagingBrain(config, body, [rid], [agent_rng(welcome.seed, rid)], tick_s)
-
-
 class AgentNode:
-    def __init__(self, session: zenoh.Session, keys: Keys, robot_id: int, brain: ForagingBrain):
+    def __init__(self, session: zenoh.Session, keys: Keys, robot_id: int, brain: AgentBrain):
         self.session = session
         self.keys = keys
         self.robot_id = robot_id
@@ -95,61 +78,22 @@ class AgentNode:
         self.last_sense_at = time.monotonic()
         self.world_lost_at: float | None = None
         self.ticks = 0
-        self._capacity = brain.config.heard_capacity
-        self._no_mail = Inbox.empty(self._capacity)
         self._decls = []
-
-    def _inbox(self, sense: EpuckSense) -> Inbox:
-        if not sense.received:
-            return self._no_mail
-        rows, contents = [], []
-        for msg in sense.received:
-            try:
-                contents.append(SocialMessages.decode([msg.payload], self._capacity))
-                rows.append(msg)
-            except ValueError as exc:
-                self.errors.record(f"robot {msg.sender_id}", "payload", exc)
-        if not rows:
-            return Inbox.empty(self._capacity)
-        content = SocialMessages(
-            *(np.concatenate([getattr(c, f) for c in contents]) for f in SocialMessages.__dataclass_fields__)
-        )
-        return Inbox(
-            receiver=np.zeros(len(rows), np.int64),
-            sender_id=np.array([m.sender_id for m in rows], np.int64),
-            range_m=np.array([m.range_m for m in rows]),
-            bearing_rad=np.array([m.bearing_rad for m in rows]),
-            content=content,
-        )
 
     def _on_sense(self, sample: zenoh.Sample) -> None:
         try:
-            sense = decode(sample.payload.to_bytes(), EpuckSense)
+            sense = decode(sample.payload.to_bytes(), self.brain.sense_type)
             if sense.robot_id != self.robot_id:
                 raise ProtocolError("robot_id", f"{sense.robot_id} sent on the key of robot {self.robot_id}")
         except ProtocolError as exc:
             self.errors.record(str(sample.key_expr), "sense", exc)
             return
         self.last_sense_at = time.monotonic()
-        if sense.final:
+        if getattr(sense, "final", False):
             self.end_reason = "final sense"
             self.done.set()
             return
-        out = self.brain.step(
-            np.array([sense.encoder_steps]),
-            np.array([sense.ir]),
-            np.array([sense.ground]),
-            self._inbox(sense),
-        )
-        payload = out.messages.encode(0) if out.sending[0] else None
-        act = EpuckAct(
-            tick=sense.tick,
-            robot_id=self.robot_id,
-            wheel_speed_steps_s=tuple(out.wheel_speed_steps_s[0].tolist()),
-            payload=payload,
-            state=int(out.state[0]),
-            pose_estimate=tuple(out.pose_estimate[0].tolist()),
-        )
+        act = self.brain.act(sense, self.errors)
         self._act_pub.put(encode(act))
         self.ticks += 1
 
@@ -210,7 +154,7 @@ def run_agent(
     try:
         welcome = join(session, keys, robot_id, join_timeout_s)
         brain = brain_from_welcome(welcome)
-    except (JoinError, ProtocolError) as exc:
+    except (JoinError, BrainError, ProtocolError) as exc:
         log.error("robot %d: %s", robot_id, exc)
         return 2
     node = AgentNode(session, keys, robot_id, brain)

@@ -122,7 +122,7 @@ def main_router(args) -> int:
 def main_world(args) -> int:
     from swarmloc.protocol.keys import Keys
     from swarmloc.protocol.session import bound_endpoints, config_from_args, open_session
-    from swarmloc.world.foraging import ForagingWorld
+    from swarmloc.world.service import served_world
     from swarmloc.world.server import WorldServer
 
     scenario = load_from_args(args)
@@ -143,7 +143,7 @@ def main_world(args) -> int:
         os.replace(tmp, out / "results.json")
 
     with open_session(config_from_args(args)) as session:
-        server = WorldServer(session, keys, ForagingWorld(scenario.world), scenario.to_dict(),
+        server = WorldServer(session, keys, served_world(scenario.to_dict()), scenario.to_dict(),
                              realtime=args.realtime, act_timeout_s=args.act_timeout_s,
                              join_timeout_s=args.join_timeout_s,
                              checkpoint=write_results if out else None,

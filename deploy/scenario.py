@@ -23,10 +23,17 @@ DEFAULT_SCENARIO = "ES1"
 
 @dataclass(frozen=True)
 class Scenario:
+    """An e-puck foraging scenario (family ``"foraging"``; other families have their own)."""
+
     name: str = "custom"
     description: str = ""
+    family: str = "foraging"
     world: WorldConfig = field(default_factory=WorldConfig)
     agent: AgentConfig = field(default_factory=AgentConfig)
+
+    def __post_init__(self) -> None:
+        if self.family != "foraging":
+            raise ConfigError(f"family: {self.family!r} is not an e-puck foraging scenario")
 
     def to_dict(self) -> dict:
         return to_dict(self)

@@ -1,7 +1,9 @@
-"""The world-server: runs :class:`ForagingWorld` over Zenoh for agent processes.
+"""The world-server: serves a world model over Zenoh to agent processes.
 
-A thin shell: decode, call the model, encode, publish. Per tick ``k`` it publishes ``Sense(k)`` to
-every live robot, waits for ``Act(k)`` from each, then steps the world.
+A thin shell: decode, call the model, encode, publish. It knows no robot family: it serves a
+:class:`~swarmloc.world.service.ServedWorld` (the e-puck foraging world, the laser world, the
+vision world, a replay of recorded data). Per tick ``k`` it publishes ``Sense(k)`` to every live
+robot, waits for ``Act(k)`` from each, then steps the world with the Acts it got.
 
 - *Lockstep* (default): waits for every live robot's Act, up to ``act_timeout_s``; a robot that
   misses it keeps its previous wheel command for that tick and sends nothing. Given a seed, the run
@@ -25,23 +27,18 @@ from dataclasses import dataclass, field
 import numpy as np
 import zenoh
 
-from swarmloc.protocol.epuck import on_path
 from swarmloc.protocol.errors import ErrorCounter
 from swarmloc.protocol.keys import Keys
 from swarmloc.protocol.messages import (
-    EpuckAct,
-    EpuckSense,
     ErrorReport,
     Join,
     ProtocolError,
-    RabMessage,
     RunEnd,
     Welcome,
-    WorldState,
     decode,
     encode,
 )
-from swarmloc.world.foraging import ForagingWorld
+from swarmloc.world.service import ServedWorld
 
 log = logging.getLogger("swarmloc.world")
 
@@ -72,13 +69,13 @@ class TickStats:
 
 
 class WorldServer:
-    """Serve one run of a foraging world to agent processes."""
+    """Serve one run of a world to agent processes."""
 
     def __init__(
         self,
         session: zenoh.Session,
         keys: Keys,
-        world: ForagingWorld,
+        world: ServedWorld,
         scenario: dict,
         *,
         realtime: bool = False,
@@ -109,10 +106,7 @@ class WorldServer:
         self._current_tick = -1
         self._awaited = 0
         self._got = np.zeros(n, bool)
-        self._cmd = np.zeros((n, 2))
-        self._sending = np.zeros(n, bool)
-        self._payloads: list[bytes | None] = [None] * n
-        self._state = np.zeros(n, np.int64)
+        self._acts: list = [None] * n
         self._stop = threading.Event()
         self._decls = []
 
@@ -134,7 +128,7 @@ class WorldServer:
         with self._cond:
             self._joined[join.robot_id] = True
         welcome = Welcome(
-            robot_id=join.robot_id, run=self.keys.run, seed=self.world.config.seed,
+            robot_id=join.robot_id, run=self.keys.run, seed=self.world.seed,
             scenario=self.scenario,
         )
         query.reply(self.keys.join, encode(welcome))
@@ -158,7 +152,7 @@ class WorldServer:
         key = str(sample.key_expr)
         try:
             robot = Keys.robot_id_from_key(key)
-            act = decode(sample.payload.to_bytes(), EpuckAct)
+            act = decode(sample.payload.to_bytes(), self.world.act_type)
             if act.robot_id != robot:
                 raise ProtocolError("robot_id", f"{act.robot_id} published on the key of robot {robot}")
             if robot >= self.world.n_robots:
@@ -174,10 +168,7 @@ class WorldServer:
                 self.errors.record(key, "duplicate act", ValueError(f"second act for tick {act.tick}"))
                 return
             self._got[robot] = True
-            self._cmd[robot] = act.wheel_speed_steps_s
-            self._sending[robot] = act.payload is not None
-            self._payloads[robot] = act.payload
-            self._state[robot] = act.state
+            self._acts[robot] = act
             self._awaited -= 1
             if self._awaited <= 0:  # wake the loop once, when the last awaited act is in
                 self._cond.notify_all()
@@ -215,26 +206,10 @@ class WorldServer:
         with self._cond:
             self._cond.notify_all()
 
-    def _senses(self, obs, outgoing: list[bytes | None]) -> None:
-        d = obs.deliveries
-        received: list[list[RabMessage]] = [[] for _ in range(self.world.n_robots)]
-        if len(d.sender):
-            for s, r, rng_m, b in zip(d.sender.tolist(), d.receiver.tolist(), d.range_m.tolist(), d.bearing_rad.tolist()):
-                payload = outgoing[s]
-                if payload is not None:
-                    received[r].append(RabMessage(s, rng_m, b, payload))
-        enc, ir, ground = obs.encoder_steps.tolist(), obs.ir.tolist(), obs.ground.tolist()
-        for i in np.flatnonzero(self.world.alive).tolist():
-            sense = EpuckSense(
-                tick=obs.tick, robot_id=i, encoder_steps=tuple(enc[i]), ir=tuple(ir[i]),
-                ground=tuple(ground[i]), received=tuple(received[i]),
-            )
-            self._sense_pub[i].put(encode(sense))
-
     def _collect(self, tick_started: float) -> None:
         """Wait for this tick's acts; return when all live robots answered or time is up."""
         if self.realtime:
-            deadline = tick_started + self.world.config.tick_s
+            deadline = tick_started + self.world.tick_s
         else:
             deadline = time.monotonic() + self.act_timeout_s
         with self._cond:
@@ -270,7 +245,7 @@ class WorldServer:
         world = self.world
         n = world.n_robots
         self.stats.started_s = time.perf_counter()
-        period = world.config.tick_s
+        period = world.tick_s
         next_tick_at = time.monotonic()
         next_checkpoint_at = time.monotonic() + self.checkpoint_every_s
         while not world.done and not self._stop.is_set():
@@ -289,22 +264,18 @@ class WorldServer:
                     world.revive(i)
                 self._current_tick = world.tick
                 self._got[:] = False
-                self._sending[:] = False
-                # Messages sent at the previous tick are delivered now; take them before this
-                # tick's acts (which may arrive as soon as the first Sense is out) replace them.
-                outgoing, self._payloads = self._payloads, [None] * n
+                self._acts = [None] * n
                 self._awaited = int((world.alive & self._live).sum())
-            obs = world.observe()
-            self._senses(obs, outgoing)
+            for robot, sense in world.senses():
+                self._sense_pub[robot].put(sense)
             started = time.monotonic()
             self._collect(started)
             with self._cond:
                 self._current_tick = -1  # acts arriving now are late
                 self.stats.late_acts += int((~self._got & world.alive & self._live).sum())
-                cmd = self._cmd.copy()  # a missing act keeps the previous command
-                sending = self._sending & self._got
-                foraging = on_path(self._state)
-            world.step(cmd, sending, foraging)
+                acts = self._acts  # None where no act came: the world keeps that robot's command
+                self._acts = [None] * n
+            world.step(acts)
             self.stats.ticks += 1
             self.stats.tick_durations_s.append(time.perf_counter() - t0)
             if world.tick % self.state_every_ticks == 0 or world.done:
@@ -322,20 +293,15 @@ class WorldServer:
         return self.finish("completed" if world.done else "stopped")
 
     def _publish_state(self) -> None:
-        w = self.world
-        state = WorldState(
-            tick=w.tick, time_s=w.tick * w.config.tick_s,
-            poses=tuple(tuple(p) for p in w.pose.tolist()), alive=tuple(w.alive.tolist()),
-            round_trips=int(w.metrics.round_trips.sum()),
-        )
-        self._state_pub.put(encode(state))
+        self._state_pub.put(encode(self.world.state()))
 
     def snapshot(self, reason: str) -> dict:
         """The run's figures so far."""
         return {
             "reason": reason,
             "tick": self.world.tick,
-            "metrics": self.world.metrics.summary(),
+            "family": self.world.family,
+            "metrics": self.world.summary(),
             "transport": self.stats.summary(),
             "rejected": dict(self.errors.counts),
             "dead_robots": np.flatnonzero(~self.world.alive).tolist(),

@@ -1,0 +1,126 @@
+"""The brains an agent process can run, behind one interface the agent-node shell calls.
+
+The shell (:mod:`swarmloc.agents.node`) joins a run, subscribes to its robot's Sense key and, for
+each Sense, asks its :class:`AgentBrain` for the Act to publish. Which brain runs follows the
+scenario the world sent in its Welcome (its ``family`` key, ``"foraging"`` when absent): one
+adapter per robot family, a few lines around a pure brain. Family modules are imported only when
+asked for.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any, Protocol
+
+import numpy as np
+
+from swarmloc.config import ConfigError, from_dict
+from swarmloc.protocol.epuck import EpuckBody
+from swarmloc.protocol.errors import ErrorCounter
+from swarmloc.protocol.messages import EpuckAct, EpuckSense, Welcome
+
+
+class BrainError(RuntimeError):
+    """The world's scenario cannot build this brain."""
+
+
+class AgentBrain(Protocol):
+    """One robot's brain as the agent shell sees it."""
+
+    sense_type: type
+
+    def act(self, sense: Any, errors: ErrorCounter) -> Any:
+        """The Act answering ``sense``; a teammate's undecodable payload inside it is recorded
+        in ``errors`` and skipped."""
+
+
+class ForagingAgent:
+    """The e-puck foraging controller with social odometry (seeds 000/001) for one robot."""
+
+    sense_type = EpuckSense
+
+    def __init__(self, brain, robot_id: int) -> None:
+        from swarmloc.agents.foraging import Inbox
+
+        self.brain = brain
+        self.robot_id = robot_id
+        self._capacity = brain.config.heard_capacity
+        self._no_mail = Inbox.empty(self._capacity)
+
+    @classmethod
+    def from_welcome(cls, welcome: Welcome) -> ForagingAgent:
+        from swarmloc.agents.foraging import AgentConfig, ForagingBrain, agent_rng
+
+        scenario = welcome.scenario
+        try:
+            config = from_dict(AgentConfig, scenario.get("agent", {}), "agent")
+            world = scenario.get("world", {})
+            body = from_dict(EpuckBody, world.get("body", {}), "world.body")
+            tick_s = float(world.get("tick_s", 0.1))
+        except (ConfigError, AttributeError, TypeError, ValueError) as exc:
+            raise BrainError(f"the world's scenario is not usable: {exc}") from None
+        rid = welcome.robot_id
+        return cls(ForagingBrain(config, body, [rid], [agent_rng(welcome.seed, rid)], tick_s), rid)
+
+    def _inbox(self, sense: EpuckSense, errors: ErrorCounter):
+        from swarmloc.agents.foraging import Inbox, SocialMessages
+
+        if not sense.received:
+            return self._no_mail
+        rows, contents = [], []
+        for msg in sense.received:
+            try:
+                contents.append(SocialMessages.decode([msg.payload], self._capacity))
+                rows.append(msg)
+            except ValueError as exc:
+                errors.record(f"robot {msg.sender_id}", "payload", exc)
+        if not rows:
+            return Inbox.empty(self._capacity)
+        content = SocialMessages(
+            *(np.concatenate([getattr(c, f) for c in contents]) for f in SocialMessages.__dataclass_fields__)
+        )
+        return Inbox(
+            receiver=np.zeros(len(rows), np.int64),
+            sender_id=np.array([m.sender_id for m in rows], np.int64),
+            range_m=np.array([m.range_m for m in rows]),
+            bearing_rad=np.array([m.bearing_rad for m in rows]),
+            content=content,
+        )
+
+    def act(self, sense: EpuckSense, errors: ErrorCounter) -> EpuckAct:
+        out = self.brain.step(
+            np.array([sense.encoder_steps]),
+            np.array([sense.ir]),
+            np.array([sense.ground]),
+            self._inbox(sense, errors),
+        )
+        return EpuckAct(
+            tick=sense.tick,
+            robot_id=self.robot_id,
+            wheel_speed_steps_s=tuple(out.wheel_speed_steps_s[0].tolist()),
+            payload=out.messages.encode(0) if out.sending[0] else None,
+            state=int(out.state[0]),
+            pose_estimate=tuple(out.pose_estimate[0].tolist()),
+        )
+
+
+#: family name -> "module:function" building an AgentBrain from the world's Welcome.
+FAMILIES: dict[str, str] = {
+    "foraging": "swarmloc.agents.brains:ForagingAgent.from_welcome",
+    "laser": "swarmloc.agents.laser_agent:LaserAgent.from_welcome",
+    "vision": "swarmloc.agents.vision_agent_shell:VisionAgent.from_welcome",
+    "replay": "swarmloc.agents.replay_agent:ReplayAgent.from_welcome",
+}
+
+
+def brain_from_welcome(welcome: Welcome) -> AgentBrain:
+    """The brain the world's scenario asks for; BrainError names what is unusable."""
+    family = welcome.scenario.get("family", "foraging")
+    target = FAMILIES.get(family) if isinstance(family, str) else None
+    if target is None:
+        raise BrainError(f"the world's scenario names an unknown robot family {family!r}")
+    module, _, path = target.partition(":")
+    obj: Any = importlib.import_module(module)
+    for part in path.split("."):
+        obj = getattr(obj, part)
+    return obj(welcome)
