@@ -60,6 +60,10 @@ MAX_ROBOT_ID = 65535
 #: Ticks and counters stay below 2**53 so that they are exact in a float64 anywhere.
 MAX_TICK = 2**53 - 1
 MAX_RECEIVED = 16
+#: Radio payloads of the laser and replay families (a CFS-GA robot's above-average individuals).
+MAX_RADIO_PAYLOAD_BYTES = 32 * 1024
+MAX_BEAMS = 1024
+MAX_TEAMMATES = 64
 MAX_POSES = 100_000
 MAX_STRING_CHARS = 256
 MAX_DICT_DEPTH = 8
@@ -172,6 +176,75 @@ class EpuckAct:
     payload: bytes | None  #: outgoing RAB message (<= MAX_RAB_PAYLOAD_BYTES), None for silence
     state: int  #: controller state code 0..255 (logged)
     pose_estimate: tuple[float, float, float]  #: dead-reckoned (x_m, y_m, theta_rad), logged
+
+
+@dataclass(frozen=True, slots=True)
+class SightingMsg:
+    """A teammate as the receiving robot measures it (laser and replay families)."""
+
+    robot_id: int  #: 0..65535
+    distance_m: float  #: [0, 100] m
+    bearing_rad: float  #: direction of the teammate in the observer's frame, [-pi, pi]
+    relative_heading_rad: float  #: teammate heading minus observer heading, [-pi, pi]
+
+
+@dataclass(frozen=True, slots=True)
+class RadioMsg:
+    """A teammate's broadcast, as the world's radio medium delivered it."""
+
+    sender_id: int  #: 0..65535
+    payload: bytes  #: at most MAX_RADIO_PAYLOAD_BYTES, opaque to the world
+
+
+@dataclass(frozen=True, slots=True)
+class LaserSense:
+    """World to a laser robot's agent, each tick (seeds 002/003)."""
+
+    tick: int  #: 0..2**53-1
+    robot_id: int  #: 0..65535
+    odometry_delta_s_m: float  #: displacement the odometry reports this step, finite
+    odometry_delta_phi_rad: float  #: rotation the odometry reports this step, finite
+    ranges_m: tuple[float, ...]  #: 1..1024 laser ranges, each in [0, 100] m
+    sightings: tuple[SightingMsg, ...]  #: at most 64 teammates in view
+    received: tuple[RadioMsg, ...]  #: at most 64 radio messages from the previous tick
+    final: bool = False  #: the run is over
+
+
+@dataclass(frozen=True, slots=True)
+class LandmarkMsg:
+    """A landmark measurement of the replay family: landmark id, range and bearing."""
+
+    landmark_id: int  #: 0..65535
+    range_m: float  #: [0, 100] m
+    bearing_rad: float  #: [-pi, pi]
+
+
+@dataclass(frozen=True, slots=True)
+class ReplaySense:
+    """World to an agent of a replayed data set (MRCLAM), each tick."""
+
+    tick: int  #: 0..2**53-1
+    robot_id: int  #: 0..65535
+    time_s: float  #: time since the start of the replay, >= 0
+    speed_mps: float  #: recorded forward speed over this tick, finite
+    turn_rate_rad_s: float  #: recorded turn rate over this tick, finite
+    dt_s: float  #: tick length, (0, 10] s
+    landmarks: tuple[LandmarkMsg, ...]  #: at most 64 landmark measurements this tick
+    robots: tuple[LandmarkMsg, ...]  #: at most 64 measurements of teammates (id = robot id)
+    received: tuple[RadioMsg, ...]  #: at most 64 teammates' broadcasts of the previous tick
+    final: bool = False  #: the run is over
+
+
+@dataclass(frozen=True, slots=True)
+class EstimateAct:
+    """Agent to world, each tick, for localization-only families (laser, replay, vision): the
+    robot's pose estimate (logged and scored), an optional broadcast, and optional commands."""
+
+    tick: int  #: the tick of the Sense this answers
+    robot_id: int  #: 0..65535
+    pose_estimate: tuple[float, float, float]  #: (x_m, y_m, theta_rad), finite
+    payload: bytes | None  #: broadcast to teammates (<= MAX_RADIO_PAYLOAD_BYTES), None for silence
+    command: tuple[float, ...]  #: family-specific motion command, at most 8 finite values
 
 
 @dataclass(frozen=True, slots=True)
@@ -418,10 +491,10 @@ class _FloatTuple(_Spec):
 class _Tuple(_Spec):
     """A variable-length tuple of at most ``max_len`` items, each checked by ``item``."""
 
-    __slots__ = ("item", "max_len")
+    __slots__ = ("item", "max_len", "min_len")
 
-    def __init__(self, item: _Spec, max_len: int) -> None:
-        self.item, self.max_len = item, max_len
+    def __init__(self, item: _Spec, max_len: int, min_len: int = 0) -> None:
+        self.item, self.max_len, self.min_len = item, max_len, min_len
 
     def check(self, value: Any) -> tuple:
         return self._map(value, self.item.check)
@@ -434,6 +507,8 @@ class _Tuple(_Spec):
             raise ProtocolError("", f"expected tuple, got {_tname(value)}")
         if len(value) > self.max_len:
             raise ProtocolError("", f"{len(value)} entries exceeds the limit of {self.max_len}")
+        if len(value) < self.min_len:
+            raise ProtocolError("", f"{len(value)} entries, expected at least {self.min_len}")
         try:
             return tuple([check(x) for x in value])
         except ProtocolError:
@@ -540,6 +615,7 @@ class _PlainDict(_Spec):
 _ROBOT_ID = _Int(0, MAX_ROBOT_ID)
 _TICK = _Int(0, MAX_TICK)
 _FINITE = _Float()
+_BEARING = _Float(-math.pi - BEARING_TOLERANCE_RAD, math.pi + BEARING_TOLERANCE_RAD)
 
 _FIELD_SPECS: dict[type, tuple[str, dict[str, _Spec]]] = {
     Join: ("join", {
@@ -575,6 +651,50 @@ _FIELD_SPECS: dict[type, tuple[str, dict[str, _Spec]]] = {
         "payload": _Bytes(MAX_RAB_PAYLOAD_BYTES, optional=True),
         "state": _Int(0, 255),
         "pose_estimate": _FloatTuple(3),
+    }),
+    SightingMsg: ("sighting", {
+        "robot_id": _ROBOT_ID,
+        "distance_m": _Float(0.0, MAX_RANGE_M),
+        "bearing_rad": _BEARING,
+        "relative_heading_rad": _BEARING,
+    }),
+    RadioMsg: ("radio", {
+        "sender_id": _ROBOT_ID,
+        "payload": _Bytes(MAX_RADIO_PAYLOAD_BYTES),
+    }),
+    LaserSense: ("laser_sense", {
+        "tick": _TICK,
+        "robot_id": _ROBOT_ID,
+        "odometry_delta_s_m": _FINITE,
+        "odometry_delta_phi_rad": _FINITE,
+        "ranges_m": _Tuple(_Float(0.0, MAX_RANGE_M), MAX_BEAMS, min_len=1),
+        "sightings": _Tuple(_Message(SightingMsg), MAX_TEAMMATES),
+        "received": _Tuple(_Message(RadioMsg), MAX_TEAMMATES),
+        "final": _Bool(),
+    }),
+    LandmarkMsg: ("landmark", {
+        "landmark_id": _ROBOT_ID,
+        "range_m": _Float(0.0, MAX_RANGE_M),
+        "bearing_rad": _BEARING,
+    }),
+    ReplaySense: ("replay_sense", {
+        "tick": _TICK,
+        "robot_id": _ROBOT_ID,
+        "time_s": _Float(0.0),
+        "speed_mps": _FINITE,
+        "turn_rate_rad_s": _FINITE,
+        "dt_s": _Float(1e-9, 10.0),
+        "landmarks": _Tuple(_Message(LandmarkMsg), MAX_TEAMMATES),
+        "robots": _Tuple(_Message(LandmarkMsg), MAX_TEAMMATES),
+        "received": _Tuple(_Message(RadioMsg), MAX_TEAMMATES),
+        "final": _Bool(),
+    }),
+    EstimateAct: ("estimate_act", {
+        "tick": _TICK,
+        "robot_id": _ROBOT_ID,
+        "pose_estimate": _FloatTuple(3),
+        "payload": _Bytes(MAX_RADIO_PAYLOAD_BYTES, optional=True),
+        "command": _Tuple(_FINITE, 8),
     }),
     WorldState: ("world_state", {
         "tick": _TICK,

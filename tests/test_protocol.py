@@ -23,10 +23,17 @@ from swarmloc.protocol.messages import (
     MAX_RAB_PAYLOAD_BYTES,
     MESSAGE_TYPES,
     PROTOCOL_VERSION,
+    MAX_RADIO_PAYLOAD_BYTES,
     EpuckAct,
     EpuckSense,
     ErrorReport,
+    EstimateAct,
     Join,
+    LandmarkMsg,
+    LaserSense,
+    RadioMsg,
+    ReplaySense,
+    SightingMsg,
     ProtocolError,
     RabMessage,
     RunEnd,
@@ -96,6 +103,22 @@ EXAMPLES = [
     WorldState(tick=0, time_s=0.0, poses=(), alive=(), round_trips=0),
     RunEnd(tick=1000, reason="duration reached", metrics={"error_m": {"mean": 0.1, "n": 30}}),
     ErrorReport(code="protocol", field="received[3].range_m", detail="101.0 is out of range"),
+]
+SIGHTING = SightingMsg(robot_id=2, distance_m=1.5, bearing_rad=-math.pi, relative_heading_rad=0.5)
+RADIO = RadioMsg(sender_id=2, payload=b"\x00" * MAX_RADIO_PAYLOAD_BYTES)
+LASER = LaserSense(
+    tick=7, robot_id=1, odometry_delta_s_m=0.05, odometry_delta_phi_rad=-0.1,
+    ranges_m=(0.0, 8.0, 100.0), sightings=(SIGHTING,), received=(RadioMsg(0, b"ga"),),
+)
+LANDMARK = LandmarkMsg(landmark_id=11, range_m=2.5, bearing_rad=0.3)
+REPLAY = ReplaySense(
+    tick=3, robot_id=4, time_s=0.06, speed_mps=0.2, turn_rate_rad_s=-0.1, dt_s=0.02,
+    landmarks=(LANDMARK,), robots=(LandmarkMsg(2, 1.0, -0.2),), received=(), final=False,
+)
+ESTIMATE = EstimateAct(tick=7, robot_id=1, pose_estimate=(1.0, 2.0, -3.0), payload=b"p", command=(0.1, -0.2))
+EXAMPLES += [
+    SIGHTING, RADIO, LASER, LASER.__class__(0, 0, 0.0, 0.0, (1.0,), (), (), final=True),
+    LANDMARK, REPLAY, ESTIMATE, EstimateAct(0, 0, (0.0, 0.0, 0.0), None, ()),
 ]
 
 
@@ -265,6 +288,16 @@ REJECTIONS = [
     ("metrics_long_key", EXAMPLES[9], _set("metrics", {"k" * 300: 1}), "metrics"),
     ("alive_mismatch", EXAMPLES[7], _set("alive", [True]), "alive"),
     ("alive_not_bool", EXAMPLES[7], _set("alive[1]", 1), "alive[1]"),
+    ("no_beams", LASER, _set("ranges_m", []), "ranges_m"),
+    ("range_too_long", LASER, _set("ranges_m[1]", 100.5), "ranges_m[1]"),
+    ("range_nan", LASER, _set("ranges_m[0]", float("nan")), "ranges_m[0]"),
+    ("sighting_bearing", LASER, _set("sightings[0].bearing_rad", 4.0), "sightings[0].bearing_rad"),
+    ("radio_payload_too_long", LASER, _set("received[0].payload", b"x" * (MAX_RADIO_PAYLOAD_BYTES + 1)),
+     "received[0].payload"),
+    ("replay_dt_zero", REPLAY, _set("dt_s", 0.0), "dt_s"),
+    ("landmark_negative_range", REPLAY, _set("landmarks[0].range_m", -1.0), "landmarks[0].range_m"),
+    ("command_too_long", ESTIMATE, _set("command", [0.0] * 9), "command"),
+    ("estimate_inf", ESTIMATE, _set("pose_estimate[2]", float("inf")), "pose_estimate[2]"),
 ]
 
 
