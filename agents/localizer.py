@@ -14,8 +14,9 @@ Each step the robot receives a :class:`LaserObservation`:
   robot within range and line of sight, 002 §3.2, 003 §IV-B);
 - the radio messages teammates broadcast at the previous step (:class:`RadioMessage`), delivered
   by the world's radio medium (range, line of sight, loss). Their payload is opaque bytes built by
-  the sender's :meth:`Localizer.outgoing`; each algorithm owns its codec and must reject a payload
-  it cannot decode with ``ValueError`` (the shell counts it and goes on).
+  the sender's :meth:`Localizer.outgoing`; each algorithm owns its codec. A payload it cannot
+  decode is skipped, never allowed to stop the step, and listed in the localizer's ``rejected``
+  attribute as ``(sender_id, ValueError)`` for that step (the shell counts them and goes on).
 
 After :meth:`Localizer.step` the robot reports :meth:`Localizer.estimate` (its best pose) and may
 broadcast :meth:`Localizer.outgoing` (at most :data:`MAX_RADIO_PAYLOAD_BYTES`).
@@ -82,6 +83,20 @@ class LocalizerSetup:
     dt_s: float = 1.0
     cooperative: bool = True
     extra: dict = field(default_factory=dict)
+
+    @classmethod
+    def from_world_config(cls, config, robot_id: int, cooperative: bool = True,
+                          extra: dict | None = None) -> LocalizerSetup:
+        """The setup of robot ``robot_id`` of a laser world configured by ``config`` (a
+        ``LaserWorldConfig``): what the world and an agent process both derive from the scenario."""
+        return cls(
+            robot_id=int(robot_id), map_name=config.map, n_beams=config.laser.n_beams,
+            max_range_m=config.laser.max_range_m, laser_noise_std_m=config.laser.noise_std_m,
+            speed_std_mps=config.motion.speed_std_mps,
+            turn_rate_std_rad_s=config.motion.turn_rate_std_rad_s,
+            relative_distance_std_m=config.relative.distance_std_m,
+            relative_orientation_std_rad=config.relative.orientation_std_rad,
+            dt_s=config.dt_s, cooperative=bool(cooperative), extra=dict(extra or {}))
 
 
 @runtime_checkable
