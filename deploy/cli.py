@@ -44,17 +44,17 @@ def _scenario_args(p: argparse.ArgumentParser, positional: bool = True) -> None:
     g.add_argument("--robots", type=int, help="number of robots")
     g.add_argument("--strategy", help="NC, SSGIKF, DSGIKF, SSGIFF, DSGIFF, SSIKF or DSIKF")
     g.add_argument("--beta", type=float, help="Fermi beta of the SGIFFs")
+    g.add_argument("--algorithm", help="laser scenarios: ssga, simple_ga, cfsga or amcl")
     g.add_argument("--seed", type=int, help="run seed")
     g.add_argument("--duration-s", type=float, help="simulated duration in seconds")
     g.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="any scenario value, e.g. --set world.medium.range_m=0.25 (repeatable)")
 
 
-def load_from_args(args):
-    """The scenario named by the arguments, with every override applied and validated."""
-    import json as _json
-
-    from swarmloc.deploy.scenario import load_scenario
+def load_from_args(args, any_family: bool = False):
+    """The scenario named by the arguments, with every override applied and validated: an e-puck
+    :class:`Scenario`, or with ``any_family`` an :class:`AnyScenario` of any robot family."""
+    from swarmloc.deploy.scenario import load_any
 
     overrides = list(args.set)
     if args.scenario is None:
@@ -62,12 +62,15 @@ def load_from_args(args):
         if getattr(args, "command", None) == "run" and args.duration_s is None:
             # The default demo finishes in about a minute on two cores; the full ES1 is 1800 s.
             overrides.insert(0, f"world.duration_s={DEFAULT_RUN_DURATION_S}")
-    for flag, key in (("robots", "world.robots"), ("strategy", "agent.strategy"), ("beta", "agent.beta"),
-                      ("seed", "world.seed"), ("duration_s", "world.duration_s")):
-        value = getattr(args, flag, None)
-        if value is not None:
-            overrides.append(f"{key}={_json.dumps(value)}")
-    return load_scenario(args.scenario, overrides)
+    flags = {flag: getattr(args, flag, None)
+             for flag in ("robots", "strategy", "beta", "seed", "duration_s", "algorithm")}
+    loaded = load_any(args.scenario, flags, overrides)
+    if any_family:
+        return loaded
+    if loaded.family != "foraging":
+        raise ConfigError(f"scenario '{args.scenario}' is a {loaded.family} scenario; "
+                          f"this command runs e-puck foraging scenarios")
+    return loaded.scenario
 
 
 def _transport(p: argparse.ArgumentParser) -> None:
@@ -122,18 +125,18 @@ def main_router(args) -> int:
 def main_world(args) -> int:
     from swarmloc.protocol.keys import Keys
     from swarmloc.protocol.session import bound_endpoints, config_from_args, open_session
-    from swarmloc.world.service import served_world
     from swarmloc.world.server import WorldServer
+    from swarmloc.world.service import served_world
 
-    scenario = load_from_args(args)
+    scenario = load_from_args(args, any_family=True)
     keys = Keys(args.run)
     stop = _install_stop()
     out = Path(args.out) if args.out else None
     if out:
         out.mkdir(parents=True, exist_ok=True)
         (out / "scenario.json").write_text(json.dumps(scenario.to_dict(), indent=2))
-    labels = {"scenario": scenario.name, "seed": scenario.world.seed, "run": args.run,
-              "strategy": scenario.agent.strategy, "robots": scenario.world.robots,
+    labels = {"scenario": scenario.name, "family": scenario.family, "seed": scenario.seed,
+              "run": args.run, "strategy": scenario.label, "robots": scenario.robots,
               "mode": "realtime" if args.realtime else "lockstep"}
 
     def write_results(result: dict) -> None:
@@ -158,7 +161,7 @@ def main_world(args) -> int:
                 result = server.finish("agents missing")
                 code = 3
             else:
-                log.info("all %d agents joined; running", scenario.world.robots)
+                log.info("all %d agents joined; running", scenario.robots)
                 result = server.run()
                 code = 0 if result["reason"] == "completed" else 4
         finally:
@@ -177,6 +180,8 @@ def main_agent(args) -> int:
 
     stop = _install_stop()
     keys = Keys(args.run)
+    if args.nice:
+        os.nice(args.nice)
     with open_session(config_from_args(args)) as session:
         return run_agent(session, keys, args.robot, stop, join_timeout_s=args.join_timeout_s,
                          world_timeout_s=args.world_timeout_s, world_grace_s=args.world_grace_s)
@@ -202,9 +207,21 @@ def main_batch(args) -> int:
 def main_run(args) -> int:
     from swarmloc.deploy.run import run_local
 
-    scenario = load_from_args(args)
+    scenario = load_from_args(args, any_family=True)
     return run_local(scenario, run_name=args.run, out_root=Path(args.out), realtime=args.realtime,
                      quiet=args.quiet, join_timeout_s=args.join_timeout_s)
+
+
+def main_laser_experiment(args) -> int:
+    from swarmloc.deploy.laser_experiment import main_laser_experiment as run
+
+    return run(args)
+
+
+def main_vision_experiment(args) -> int:
+    from swarmloc.deploy.vision_batch import main as run
+
+    return run(args)
 
 
 # -- parsing ----------------------------------------------------------------------------------
@@ -249,6 +266,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="exit when no Sense came for this long")
     p.add_argument("--world-grace-s", type=float, default=10.0,
                    help="how long to wait for a world-server that went away to come back (exit code 3)")
+    p.add_argument("--nice", type=int, default=0, choices=range(20), metavar="0..19",
+                   help="lower this agent's CPU priority: on a machine with fewer cores than agents, "
+                        "the world-server (the lockstep's serial part) then runs first")
     p.set_defaults(func=main_agent)
 
     p = sub.add_parser("router", help="run a Zenoh router (no zenohd needed)")
@@ -263,6 +283,41 @@ def build_parser() -> argparse.ArgumentParser:
 
     experiment.add_parser(sub)
     report.add_parser(sub)
+
+    p = sub.add_parser("laser-experiment",
+                       help="run the laser experiments of seeds 002-003 and write their report")
+    p.add_argument("specs", nargs="*", metavar="SPEC",
+                   help="laser specs (default: laser-table3 laser-kidnap laser-collab "
+                        "laser-robustness)")
+    p.add_argument("--replications", type=int, default=None,
+                   help="replications per setting (fewer: a preview the full run resumes from)")
+    p.add_argument("--workers", type=int, default=os.cpu_count() or 1)
+    p.add_argument("--results-dir", default="results", help="where the results CSVs go")
+    p.add_argument("--report", default="docs/laser", help="report folder ('' for none)")
+    p.add_argument("--report-only", action="store_true", help="write the report, run nothing")
+    p.add_argument("--quiet", action="store_true", help="no progress output")
+    p.set_defaults(func=main_laser_experiment)
+    from swarmloc.deploy import status
+
+    status.add_parser(sub)
+
+    p = sub.add_parser("vision-experiment",
+                       help="run seed 004's vision experiments (with/without detection sharing)")
+    p.add_argument("name", help="vision-exp1, vision-exp2, vision-exp3, a .toml file, or 'all'")
+    p.add_argument("--runs", type=int, default=30, help="seeded runs per sharing mode (default 30)")
+    p.add_argument("--seed", type=int, default=1, help="first run seed (default 1)")
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--no-sharing", action="store_true", help="run without detection sharing only")
+    g.add_argument("--both", action="store_true", help="run with and without sharing")
+    p.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1))
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="scenario override, e.g. --set agent.field.k1_per_s=0.8 (repeatable)")
+    p.add_argument("--csv", default=None, help="write the rows to this CSV file")
+    p.add_argument("--report", default=None, metavar="DIR",
+                   help="write README.md, results.csv and figures to DIR (e.g. docs/vision)")
+    p.add_argument("--detection-n", type=int, default=200, help="placements per detection bin")
+    p.add_argument("--json", action="store_true", help="print the summary as JSON")
+    p.set_defaults(func=main_vision_experiment)
 
     p = sub.add_parser("scenarios", help="list the shipped scenarios")
     p.set_defaults(func=main_scenarios)

@@ -8,6 +8,7 @@ waits for the world to finish; prints the metrics; stops every process it starte
 from __future__ import annotations
 
 import json
+import os
 import secrets
 import signal
 import subprocess
@@ -18,7 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from swarmloc.deploy.launch import Supervisor, start_announcing, start_router, supervised
-from swarmloc.deploy.scenario import Scenario
+from swarmloc.deploy.scenario import AnyScenario
 
 
 def _progress_follower(endpoint: str, run: str, total_ticks: int, quiet: bool):
@@ -78,13 +79,19 @@ class LocalSwarm:
 
 def start_swarm(sup: Supervisor, scenario_file: Path, *, run: str, robots: int, out: Path,
                 log_dir: Path, realtime: bool = False, join_timeout_s: float = 180.0,
-                world_args: tuple[str, ...] = ()) -> LocalSwarm:
+                world_args: tuple[str, ...] = (), agent_nice: int | None = None) -> LocalSwarm:
     """Start a router, the world-server and ``robots`` agents under ``sup``.
 
     The world's own session is a router that the agents reach directly (one hop less for each of
     the 2N lockstep messages of a tick); it links to the standalone router, where observers and
     pieces on other hosts connect. Every piece that listens announces its endpoint: readiness.
+
+    With more agents than cores, agents run at a lower CPU priority (``agent_nice``, default 5
+    then): the world-server is the serial part of every lockstep tick, and an agent that preempts
+    it delays all the others.
     """
+    if agent_nice is None:
+        agent_nice = 5 if robots > (os.cpu_count() or 1) else 0
     _, endpoint = start_router(sup)
     args = ["world", str(scenario_file), "-m", "router", "-l", "tcp/127.0.0.1:0",
             "-e", endpoint, "--run", run, "--out", str(out), "--announce",
@@ -94,7 +101,8 @@ def start_swarm(sup: Supervisor, scenario_file: Path, *, run: str, robots: int, 
     world, world_endpoint = start_announcing(sup, args, log_path=log_dir / "world.log")
     agents = [
         sup.start(["agent", "--robot", str(i), "-m", "client", "-e", world_endpoint, "--run", run,
-                   "--join-timeout-s", str(join_timeout_s)], log_path=log_dir / f"agent-{i}.log")
+                   "--join-timeout-s", str(join_timeout_s), "--nice", str(agent_nice)],
+                  log_path=log_dir / f"agent-{i}.log")
         for i in range(robots)
     ]
     return LocalSwarm(endpoint, world, world_endpoint, agents)
@@ -113,10 +121,9 @@ def print_metrics(summary: dict) -> None:
     print(f"  robots on the path (2nd half): {'%.0f %%' % (100 * frac) if frac is not None else '-'}")
 
 
-def run_local(scenario: Scenario, *, run_name: str | None, out_root: Path, realtime: bool,
+def run_local(scenario: AnyScenario, *, run_name: str | None, out_root: Path, realtime: bool,
               quiet: bool, join_timeout_s: float = 180.0) -> int:
-    w = scenario.world
-    run = run_name or f"{scenario.name}-{scenario.agent.strategy}-s{w.seed}-{secrets.token_hex(3)}".replace(".", "_")
+    run = run_name or f"{scenario.name}-{scenario.label}-s{scenario.seed}-{secrets.token_hex(3)}".replace(".", "_")
     out = out_root / run
     out.mkdir(parents=True, exist_ok=True)
     scenario_file = out / "scenario.json"
@@ -133,12 +140,12 @@ def run_local(scenario: Scenario, *, run_name: str | None, out_root: Path, realt
 
     signal.signal(signal.SIGTERM, terminated)
     with supervised() as sup:
-        swarm = start_swarm(sup, scenario_file, run=run, robots=w.robots, out=out, log_dir=log_dir,
-                            realtime=realtime, join_timeout_s=join_timeout_s)
-        say(f"router on {swarm.router_endpoint}; run '{run}': {w.robots} robots, "
-            f"{scenario.agent.strategy}, seed {w.seed}, {w.duration_s:.0f} s simulated "
+        swarm = start_swarm(sup, scenario_file, run=run, robots=scenario.robots, out=out,
+                            log_dir=log_dir, realtime=realtime, join_timeout_s=join_timeout_s)
+        say(f"router on {swarm.router_endpoint}; run '{run}': {scenario.robots} {scenario.family} robots, "
+            f"{scenario.label}, seed {scenario.seed}, {scenario.n_ticks} ticks "
             f"({'real time' if realtime else 'lockstep'})")
-        stop_progress = _progress_follower(swarm.router_endpoint, run, w.n_ticks, quiet)
+        stop_progress = _progress_follower(swarm.router_endpoint, run, scenario.n_ticks, quiet)
         try:
             code = swarm.world.wait()
         finally:
@@ -148,7 +155,12 @@ def run_local(scenario: Scenario, *, run_name: str | None, out_root: Path, realt
         print(f"swarmloc: the world-server failed (exit {code}); see {log_dir / 'world.log'}", file=sys.stderr)
         return 1
     result = json.loads(results_file.read_text())
-    print_metrics(result)
+    if scenario.family == "foraging":
+        print_metrics(result)
+    else:
+        print(f"scenario {scenario.name}  {scenario.label}  seed {scenario.seed}  robots {scenario.robots}")
+        for key, value in result["metrics"].items():
+            print(f"  {key:29s}: {value}")
     t = result["transport"]
     print(f"  transport                    : {t['ticks']} ticks in {t['wall_s']} s = {t['ticks_per_s']} ticks/s "
           f"(tick p50 {t['tick_ms_p50']} ms, p99 {t['tick_ms_p99']} ms)")

@@ -44,9 +44,24 @@ class Scenario:
 
 
 
-def builtin_names() -> list[str]:
+def _shipped() -> dict[str, tuple[str, Path]]:
+    """Shipped scenario name -> (family, file): e-puck ones at the top of ``scenarios/``, other
+    families in a sub-folder named after the family."""
     folder = resources.files("swarmloc.deploy") / "scenarios"
-    return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml"))
+    found: dict[str, tuple[str, Path]] = {}
+    for entry in folder.iterdir():
+        if entry.name.endswith(".toml"):
+            found[entry.name[:-5]] = ("foraging", Path(str(entry)))
+        elif entry.is_dir() and entry.name in FAMILY_SCENARIOS:
+            for sub in entry.iterdir():
+                if sub.name.endswith(".toml"):
+                    found[sub.name[:-5]] = (entry.name, Path(str(sub)))
+    return found
+
+
+def builtin_names(family: str | None = "foraging") -> list[str]:
+    """Shipped scenario names of one family (None: every family)."""
+    return sorted(n for n, (f, _) in _shipped().items() if family is None or f == family)
 
 
 def scenario_data(name_or_path: str) -> dict:
@@ -59,7 +74,8 @@ def scenario_data(name_or_path: str) -> dict:
             raise ConfigError(f"{path}: cannot read scenario: {exc}") from None
     if path.suffix == ".toml" or path.exists():
         return load_toml(path)
-    names = builtin_names()
+    shipped = _shipped()
+    names = sorted(shipped)
     if name_or_path not in names:
         import difflib
 
@@ -69,11 +85,96 @@ def scenario_data(name_or_path: str) -> dict:
             f"scenario '{name_or_path}': no such file or shipped scenario{hint} "
             f"(shipped: {', '.join(names)})"
         )
-    folder = resources.files("swarmloc.deploy") / "scenarios"
-    return load_toml(Path(str(folder / f"{name_or_path}.toml")))
+    family, file = shipped[name_or_path]
+    data = load_toml(file)
+    if family != "foraging":
+        data.setdefault("family", family)
+    return data
 
 
 def load_scenario(name_or_path: str = DEFAULT_SCENARIO, overrides: list[str] = ()) -> Scenario:
     """Load and validate a scenario, with ``section.key=value`` overrides applied."""
     data = apply_overrides(scenario_data(name_or_path), list(overrides))
     return Scenario.from_dict(data)
+
+
+#: family -> "module:Class" of its scenario (``from_dict``/``to_dict``, validated, strict).
+FAMILY_SCENARIOS: dict[str, str] = {
+    "foraging": "swarmloc.deploy.scenario:Scenario",
+    "laser": "swarmloc.deploy.laser_batch:LaserScenario",
+    "vision": "swarmloc.deploy.vision_batch:VisionScenario",
+    "replay": "swarmloc.deploy.mrclam:ReplayScenario",
+}
+
+#: What the common command-line flags set in each family's scenario.
+FLAG_KEYS: dict[str, dict[str, str]] = {
+    "foraging": {"robots": "world.robots", "strategy": "agent.strategy", "beta": "agent.beta",
+                 "seed": "world.seed", "duration_s": "world.duration_s"},
+    "laser": {"robots": "world.robots", "seed": "world.seed", "algorithm": "algorithm.name"},
+}
+
+
+@dataclass(frozen=True)
+class AnyScenario:
+    """A scenario of any robot family, as the process commands (``run``, ``world``) need it."""
+
+    family: str
+    scenario: object
+
+    @property
+    def name(self) -> str:
+        return self.scenario.name
+
+    @property
+    def seed(self) -> int:
+        return self.scenario.world.seed
+
+    @property
+    def robots(self) -> int:
+        return self.scenario.world.robots
+
+    @property
+    def n_ticks(self) -> int:
+        world = self.scenario.world
+        return world.n_ticks if self.family == "foraging" else world.steps
+
+    @property
+    def label(self) -> str:
+        """What distinguishes runs of one scenario: the strategy, the algorithm, ..."""
+        if self.family == "foraging":
+            return self.scenario.agent.strategy
+        algorithm = getattr(self.scenario, "algorithm", None)
+        return getattr(algorithm, "name", self.family)
+
+    def to_dict(self) -> dict:
+        return {"family": self.family, **self.scenario.to_dict()}
+
+
+def family_of(data: dict) -> str:
+    family = data.get("family", "foraging")
+    if family not in FAMILY_SCENARIOS:
+        raise ConfigError(f"family: unknown robot family {family!r} (known: {', '.join(FAMILY_SCENARIOS)})")
+    return family
+
+
+def load_any(name_or_path: str, flags: dict | None = None, overrides: list[str] = ()) -> AnyScenario:
+    """Load a scenario of any family; ``flags`` (e.g. ``{"robots": 3}``) are mapped to that
+    family's keys (a flag the family has no use for is an error), then ``overrides`` applied."""
+    import importlib
+
+    data = scenario_data(name_or_path)
+    family = family_of(data)
+    keys = FLAG_KEYS.get(family, {})
+    extra = []
+    for flag, value in (flags or {}).items():
+        if value is None:
+            continue
+        if flag not in keys:
+            raise ConfigError(f"--{flag.replace('_', '-')} does not apply to a {family} scenario; use --set")
+        extra.append(f"{keys[flag]}={json.dumps(value)}")
+    data = apply_overrides({k: v for k, v in data.items() if k != "family"}, extra + list(overrides))
+    module, _, cls = FAMILY_SCENARIOS[family].partition(":")
+    scenario = getattr(importlib.import_module(module), cls).from_dict(
+        {**data, "family": "foraging"} if family == "foraging" else data
+    )
+    return AnyScenario(family, scenario)
