@@ -122,6 +122,9 @@ class AgentNode:
         self._decls.append(
             s.liveliness().declare_subscriber(k.world_alive, self._on_world_alive, history=True)
         )
+        declare = getattr(self.brain, "declare", None)
+        if declare is not None:  # a brain with keys of its own (vision agents' team keys)
+            self._decls.extend(declare(s, k, self.errors))
         self._decls.append(s.declare_subscriber(k.sense(self.robot_id), self._on_sense))
         # Declared last: the world sees us only once we can hear it.
         self._token = s.liveliness().declare_token(k.alive(self.robot_id))

@@ -111,6 +111,7 @@ FLAG_KEYS: dict[str, dict[str, str]] = {
     "foraging": {"robots": "world.robots", "strategy": "agent.strategy", "beta": "agent.beta",
                  "seed": "world.seed", "duration_s": "world.duration_s"},
     "laser": {"robots": "world.robots", "seed": "world.seed", "algorithm": "algorithm.name"},
+    "vision": {"seed": "world.seed", "duration_s": "setup.duration_s"},
 }
 
 
@@ -131,18 +132,25 @@ class AnyScenario:
 
     @property
     def robots(self) -> int:
-        return self.scenario.world.robots
+        robots = self.scenario.world.robots
+        return robots if isinstance(robots, int) else len(robots)
 
     @property
     def n_ticks(self) -> int:
         world = self.scenario.world
-        return world.n_ticks if self.family == "foraging" else world.steps
+        if self.family == "foraging":
+            return world.n_ticks
+        if self.family == "vision":
+            return round(self.scenario.setup.duration_s / world.tick_s)
+        return world.steps
 
     @property
     def label(self) -> str:
         """What distinguishes runs of one scenario: the strategy, the algorithm, ..."""
         if self.family == "foraging":
             return self.scenario.agent.strategy
+        if self.family == "vision":
+            return "sharing" if self.scenario.agent.sharing else "no-sharing"
         algorithm = getattr(self.scenario, "algorithm", None)
         return getattr(algorithm, "name", self.family)
 

@@ -63,6 +63,8 @@ MAX_RECEIVED = 16
 #: Radio payloads of the laser and replay families (a CFS-GA robot's above-average individuals).
 MAX_RADIO_PAYLOAD_BYTES = 32 * 1024
 MAX_BEAMS = 1024
+#: A vision robot's camera frame (208x160 JPEG: a few KB; PNG: up to about 100 KB).
+MAX_IMAGE_BYTES = 192 * 1024
 MAX_TEAMMATES = 64
 MAX_POSES = 100_000
 MAX_STRING_CHARS = 256
@@ -245,6 +247,30 @@ class EstimateAct:
     pose_estimate: tuple[float, float, float]  #: (x_m, y_m, theta_rad), finite
     payload: bytes | None  #: broadcast to teammates (<= MAX_RADIO_PAYLOAD_BYTES), None for silence
     command: tuple[float, ...]  #: family-specific motion command, at most 8 finite values
+
+
+@dataclass(frozen=True, slots=True)
+class VisionSense:
+    """World to a vision robot's agent, each frame (seed 004)."""
+
+    tick: int  #: 0..2**53-1
+    robot_id: int  #: 0..65535
+    time_s: float  #: simulated time of the frame, >= 0
+    image: bytes  #: the encoded camera frame (JPEG or PNG), at most MAX_IMAGE_BYTES
+    odometry_pose: tuple[float, float, float]  #: dead-reckoned (x_m, y_m, heading_rad), finite
+    head_pan_rad: float  #: head pan the frame was taken at, [-pi, pi]
+    final: bool = False  #: the run is over
+
+
+@dataclass(frozen=True, slots=True)
+class VisionAct:
+    """Vision agent to world, each frame: the walking command and the agent's estimates
+    (teammates, ball, goal; logged and scored against ground truth, never used for physics)."""
+
+    tick: int  #: the tick of the Sense this answers
+    robot_id: int  #: 0..65535
+    command: tuple[float, float, float, float]  #: forward_mps, left_mps, turn_rad_s, head_pan_rad
+    estimates: dict  #: plain dict, as :attr:`Welcome.scenario`
 
 
 @dataclass(frozen=True, slots=True)
@@ -695,6 +721,21 @@ _FIELD_SPECS: dict[type, tuple[str, dict[str, _Spec]]] = {
         "pose_estimate": _FloatTuple(3),
         "payload": _Bytes(MAX_RADIO_PAYLOAD_BYTES, optional=True),
         "command": _Tuple(_FINITE, 8),
+    }),
+    VisionSense: ("vision_sense", {
+        "tick": _TICK,
+        "robot_id": _ROBOT_ID,
+        "time_s": _Float(0.0),
+        "image": _Bytes(MAX_IMAGE_BYTES),
+        "odometry_pose": _FloatTuple(3),
+        "head_pan_rad": _BEARING,
+        "final": _Bool(),
+    }),
+    VisionAct: ("vision_act", {
+        "tick": _TICK,
+        "robot_id": _ROBOT_ID,
+        "command": _FloatTuple(4, -1000.0, 1000.0),
+        "estimates": _PlainDict(),
     }),
     WorldState: ("world_state", {
         "tick": _TICK,

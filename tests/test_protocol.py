@@ -34,6 +34,8 @@ from swarmloc.protocol.messages import (
     RadioMsg,
     ReplaySense,
     SightingMsg,
+    VisionAct,
+    VisionSense,
     ProtocolError,
     RabMessage,
     RunEnd,
@@ -116,7 +118,12 @@ REPLAY = ReplaySense(
     landmarks=(LANDMARK,), robots=(LandmarkMsg(2, 1.0, -0.2),), received=(), final=False,
 )
 ESTIMATE = EstimateAct(tick=7, robot_id=1, pose_estimate=(1.0, 2.0, -3.0), payload=b"p", command=(0.1, -0.2))
+VISION = VisionSense(tick=2, robot_id=0, time_s=0.2, image=b"\xff\xd8jpeg", odometry_pose=(0.1, 0.0, 0.05),
+                     head_pan_rad=0.3)
+VISION_ACT = VisionAct(tick=2, robot_id=0, command=(0.2, 0.0, -0.1, 0.3),
+                       estimates={"teammates": {"1": [0.5, -0.2]}, "ball": None, "goal": "ball"})
 EXAMPLES += [
+    VISION, VISION_ACT,
     SIGHTING, RADIO, LASER, LASER.__class__(0, 0, 0.0, 0.0, (1.0,), (), (), final=True),
     LANDMARK, REPLAY, ESTIMATE, EstimateAct(0, 0, (0.0, 0.0, 0.0), None, ()),
 ]
@@ -297,6 +304,9 @@ REJECTIONS = [
     ("replay_dt_zero", REPLAY, _set("dt_s", 0.0), "dt_s"),
     ("landmark_negative_range", REPLAY, _set("landmarks[0].range_m", -1.0), "landmarks[0].range_m"),
     ("command_too_long", ESTIMATE, _set("command", [0.0] * 9), "command"),
+    ("image_too_large", VISION, _set("image", b"x" * (192 * 1024 + 1)), "image"),
+    ("vision_command_nan", VISION_ACT, _set("command[2]", float("nan")), "command[2]"),
+    ("vision_estimates_not_dict", VISION_ACT, _set("estimates", [1]), "estimates"),
     ("estimate_inf", ESTIMATE, _set("pose_estimate[2]", float("inf")), "pose_estimate[2]"),
 ]
 

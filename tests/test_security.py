@@ -33,7 +33,7 @@ pytestmark = pytest.mark.integration
 DEPLOY = Path(__file__).resolve().parent.parent / "deploy" / "zenoh"
 TEMPLATE = DEPLOY / "router-secure.json5"
 EXAMPLE_CREDENTIALS = DEPLOY / "credentials.example"
-PASSWORDS = {"world": "change-me-world", "robot-3": "change-me-robot-3"}
+PASSWORDS = {"world": "change-me-world", "robot-2": "change-me-robot-2", "robot-3": "change-me-robot-3"}
 
 #: How long a negative check waits after its positive marker arrived.
 QUIET_S = 0.3
@@ -227,6 +227,24 @@ def test_robot_put_on_another_robots_act_never_arrives(router):
         assert not inbox.wait_for(b"forged-act-4", timeout=QUIET_S)
         assert b"forged-act-4" not in inside.payloads()
         assert keys.act(4) not in inbox.keys() + inside.keys()
+
+
+def test_robot_shares_blobs_only_under_its_own_id_and_teammates_hear_them(router):
+    router_session, endpoint = router
+    keys = _keys()
+    inside = Inbox()
+    HELD.append(router_session.declare_subscriber(f"{keys.prefix}/**", inside))
+    with _client(endpoint, "robot-2") as mate, _client(endpoint, "robot-3") as robot:
+        inbox = Inbox()
+        HELD.append(mate.declare_subscriber(f"{keys.prefix}/team/A/blobs/*", inbox))
+        _probe_until_received(lambda p: robot.put(keys.team_blobs("A", 3), p), inbox)
+
+        robot.put(keys.team_blobs("A", 2), b"forged-blobs-2")  # as its teammate: forbidden
+        robot.put(keys.team_blobs("A", 3), b"marker")
+        assert inbox.wait_for(b"marker")
+        assert inside.wait_for(b"marker")
+        assert not inbox.wait_for(b"forged-blobs-2", timeout=QUIET_S)
+        assert b"forged-blobs-2" not in inside.payloads()
 
 
 def test_robot_cannot_publish_sense_or_world_keys(router):
