@@ -224,6 +224,12 @@ def main_vision_experiment(args) -> int:
     return run(args)
 
 
+def main_mrclam(args) -> int:
+    from swarmloc.deploy.mrclam import main as run
+
+    return run(args)
+
+
 # -- parsing ----------------------------------------------------------------------------------
 
 
@@ -318,6 +324,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--detection-n", type=int, default=200, help="placements per detection bin")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.set_defaults(func=main_vision_experiment)
+
+    p = sub.add_parser("mrclam", help="run a localizer on an MRCLAM data set (real robots' "
+                                      "data) and score it against the ground truth")
+    from swarmloc.deploy.mrclam import add_arguments as mrclam_arguments
+
+    mrclam_arguments(p)
+    p.set_defaults(func=main_mrclam)
 
     p = sub.add_parser("scenarios", help="list the shipped scenarios")
     p.set_defaults(func=main_scenarios)
