@@ -15,8 +15,11 @@ robot's odometric frame; ``p`` (inverse confidence, eq. 23) is the distance trav
 robot last left the area, in metres.
 
 Everything is over a batch of robots, so one agent process runs a batch of one and the batch
-engine the whole swarm. The only per-robot Python loop is over robots that need a random draw
-this tick (each robot owns its generator, derived from the run seed and its id).
+engine the whole swarm. The layers run in compiled kernels (``agents/kernels.py``), the same for
+both; they evaluate the equations of :mod:`.social_odometry` (whose numpy functions remain the
+readable reference, and the tests hold the kernels to them). The only per-robot Python loop is
+over robots that need a random draw this tick (each robot owns its generator, derived from the
+run seed and its id).
 
 Modelling choices the papers leave open are named in :class:`AgentConfig`.
 """
@@ -29,16 +32,15 @@ from dataclasses import dataclass
 import msgpack
 import numpy as np
 
-from swarmloc.agents.social_odometry import STRATEGIES, fuse, transform_received
+from swarmloc.agents import kernels
+from swarmloc.agents.social_odometry import STRATEGIES
 from swarmloc.protocol.epuck import (  # noqa: F401 -- on_path is part of this module's API
+    GROUND_SENSOR_OFFSETS_M,
     IR_SENSOR_ANGLES_RAD,
     STATE_KNOWS_BOTH,
     EpuckBody,
-    ground_sensor_point,
-    integrate_pose,
     on_path,
     propagate_covariance,
-    wrap_angle,
 )
 
 NEST, PREY = 0, 1
@@ -60,7 +62,8 @@ KNOWS_BOTH = STATE_KNOWS_BOTH
 GROUND_BLACK_BELOW = 0.25
 GROUND_GREY_BELOW = 0.68
 
-_XY_BLOCK = np.diag([1.0, 1.0, 0.0])
+#: How far ahead of the body centre the middle ground sensor is: where "on an area" is.
+_GROUND_AHEAD_M = float(GROUND_SENSOR_OFFSETS_M[1, 0])
 
 _COS_IR = np.cos(IR_SENSOR_ANGLES_RAD)
 _SIN_IR = np.sin(IR_SENSOR_ANGLES_RAD)
@@ -71,9 +74,7 @@ def classify_ground(ground: np.ndarray) -> np.ndarray:
 
     Returns ``(N,)`` codes: -1 floor, ``NEST`` (any sensor black) or ``PREY`` (any sensor grey).
     """
-    black = (ground < GROUND_BLACK_BELOW).any(axis=1)
-    grey = ((ground >= GROUND_BLACK_BELOW) & (ground < GROUND_GREY_BELOW)).any(axis=1)
-    return np.where(black, NEST, np.where(grey, PREY, -1))
+    return kernels.classify_ground(np.asarray(ground, float), GROUND_BLACK_BELOW, GROUND_GREY_BELOW)
 
 
 @dataclass(frozen=True)
@@ -243,10 +244,6 @@ def _spectral_norm_xy(cov: np.ndarray) -> np.ndarray:
     return (a + c) / 2.0 + np.sqrt(((a - c) / 2.0) ** 2 + b * b)
 
 
-def _f32(x: np.ndarray) -> np.ndarray:
-    return np.asarray(x, np.float32).astype(np.float64)
-
-
 @dataclass
 class Inbox:
     """Messages received this tick by robots of a batch, sorted by (receiver, sender)."""
@@ -256,6 +253,14 @@ class Inbox:
     range_m: np.ndarray
     bearing_rad: np.ndarray
     content: SocialMessages
+    #: Row of ``content`` that each message carries (None: row m for message m). The batch
+    #: engine passes every robot's outgoing messages once and the senders' rows here.
+    content_row: np.ndarray | None = None
+
+    def rows(self) -> np.ndarray:
+        if self.content_row is None:
+            return np.arange(self.receiver.shape[0])
+        return self.content_row
 
     @classmethod
     def empty(cls, capacity: int) -> Inbox:
@@ -272,19 +277,19 @@ class BrainOutput:
     pose_estimate: np.ndarray  # (N, 3) dead-reckoned pose
 
 
-def _rank_within(group: np.ndarray) -> np.ndarray:
-    """Rank of each element within its run of equal values of a sorted ``group`` array."""
-    n = group.shape[0]
-    if n == 0:
-        return np.zeros(0, np.int64)
-    if n == 1:
-        return np.zeros(1, np.int64)
-    new_run = np.empty(n, bool)
-    new_run[0] = True
-    np.not_equal(group[1:], group[:-1], out=new_run[1:])
-    starts = np.flatnonzero(new_run)
-    run_start = np.repeat(starts, np.diff(np.append(starts, n)))
-    return np.arange(n) - run_start
+_kernels_loaded = False
+
+
+def _load_kernels(config: AgentConfig, body: EpuckBody, tick_s: float) -> None:
+    """Load (or, the first time on a machine, compile) the brain's kernels now, once per process,
+    by stepping a throwaway brain of one robot with its own generator: an agent in a real-time
+    run must not spend its first ticks loading them."""
+    global _kernels_loaded
+    if _kernels_loaded:
+        return
+    _kernels_loaded = True
+    brain = ForagingBrain(config, body, [0], [np.random.default_rng(0)], tick_s)
+    brain.step(np.zeros((1, 2)), np.zeros((1, 8)), np.ones((1, 3)), Inbox.empty(config.heard_capacity))
 
 
 class ForagingBrain:
@@ -298,6 +303,7 @@ class ForagingBrain:
         rngs: list[np.random.Generator],
         tick_s: float,
     ):
+        _load_kernels(config, body, tick_s)
         self.config = config
         self.body = body
         self.strategy = STRATEGIES[config.strategy]
@@ -335,285 +341,147 @@ class ForagingBrain:
         self.partner_ids = np.full((n, config.encounter_memory), -1, np.int64)
         self.partner_until = np.zeros((n, config.encounter_memory), np.int64)
         self._gap_ticks = round(config.encounter_gap_s / tick_s)
-        self._fuse = fuse(self.strategy, config.beta) if self.strategy.communicates else None
-        self._rows = np.arange(n)
+        self._gain = {"none": kernels.GAIN_NONE, "kalman": kernels.GAIN_KALMAN, "fermi": kernels.GAIN_FERMI}[
+            self.strategy.gain
+        ]
+        self._no_cov = np.zeros((n, 2, 3, 3))  # stands in for goal_cov where there is none
+        self._z = np.zeros(1)  # the exponent of a Fermi gain, handed out by the kernel
+        self._adopted = np.zeros((n, 2), bool)
+        # Goal vectors of the motor and send layers, their angles, robots drawing a new walk.
+        self._geometry = np.zeros((2, n, 3))
+        self._atan = np.zeros((n, 3))
+        self._need = np.zeros(n, np.int64)
+        self._n_need = np.zeros(1, np.int64)
+        self._reported: tuple | None = None  # _report()'s answer when _motors computed it
+        self._wander_low = (-math.pi, config.wander_straight_s[0])
+        self._wander_span = (math.pi - -math.pi, config.wander_straight_s[1] - config.wander_straight_s[0])
         self._silent = SocialMessages.empty(n, k)  # what a robot that never sends "sends"
         self._sending = np.full(n, self.strategy.communicates)
         spin_rad_s = 2.0 * config.turn_speed_steps_s * body.metres_per_step / body.wheelbase_m
         self._spin_rad_per_tick = spin_rad_s * tick_s
 
     # -- layers ------------------------------------------------------------------------------
+    # The work is done by the compiled kernels of agents/kernels.py, on the state arrays below.
 
-    def _odometry(self, encoder_steps: np.ndarray) -> None:
-        du = encoder_steps * self.body.metres_per_step
-        self.pose_history = (self.pose_history[1], self.pose)
-        self.pose = integrate_pose(self.pose, du[:, 0], du[:, 1], self.body.wheelbase_m)
-        travelled = np.abs(du[:, 0] + du[:, 1]) / 2.0
-        self.search_left_m -= travelled
-        if self.goal_cov is None:
-            self.goal_p_m += travelled[:, None]  # eq. 23: p is the distance travelled
-            return
-        # eq. 9-11 for each goal's covariance since the robot left it, then eq. 19.
-        k = self.config.odometry_k_m
-        before = np.repeat(self.pose_history[1], 2, axis=0)
-        cov = propagate_covariance(
-            self.goal_cov.reshape(-1, 3, 3), before, np.repeat(du[:, 0], 2), np.repeat(du[:, 1], 2),
-            self.body.wheelbase_m, k, k,
-        )
-        self.goal_cov = cov.reshape(self.n, 2, 3, 3)
-        self.goal_p_m = _spectral_norm_xy(self.goal_cov)
+    def _update(self, encoder_steps: np.ndarray, ground: np.ndarray, inbox: Inbox) -> None:
+        """Odometry, arrive, lost, receive and remember-heard layers (see :mod:`.kernels`).
 
-    def _arrive(self, area: np.ndarray) -> None:
-        """Store goal locations seen by the ground sensors; switch target on arrival.
+        *Odometry*: dead reckoning of the encoder counts (seed 000 eq. 7); ``p`` grows with the
+        distance travelled (eq. 23), or is the spectral norm of the odometry covariance
+        propagated with eq. 9-11 (eq. 19, SIKF strategies).
 
-        The stored location is the mean, over the visit, of where the robot believes its ground
+        *Arrive*: store goal locations seen by the ground sensors; switch target on arrival. The
+        stored location is the mean, over the visit, of where the robot believes its ground
         sensor was while it saw the area: a point inside the area, not the body centre beside it.
+
+        *Receive*: fuse what neighbours sent (seed 000 eq. 14-16, 27). Eq. 27 needs the range
+        and both bearings of one crossing. A message sent at tick k-1 carries the sender's goals
+        in its body frame of tick k-2 and the bearing at which it heard us at tick k-2; we heard
+        the sender at that same crossing, so our own range and bearing from last tick's table,
+        and our pose of then, complete the transform with no timing error. One exchange per
+        encounter: a recent partner still in hearing is ignored.
+
+        *Remember heard*: keep the nearest neighbours heard this tick, their ids, range and
+        bearing (measured at the previous tick's poses, when the messages crossed).
         """
-        if not (area >= 0).any():  # the common case: nobody stands on an area
-            self.visit_ticks.fill(0)
-            return
-        sensor = ground_sensor_point(self.pose)
-        for goal in (NEST, PREY):
-            inside = area == goal
-            entering = inside & (self.visit_ticks[:, goal] == 0)
-            self.visit_ticks[~inside, goal] = 0
-            if not inside.any():
-                continue
-            count = self.visit_ticks[inside, goal] + 1
-            self.visit_ticks[inside, goal] = count
-            prev = np.where(entering[inside, None], sensor[inside], self.goal_xy[inside, goal])
-            self.goal_xy[inside, goal] = prev + (sensor[inside] - prev) / count[:, None]
-            self.known[inside, goal] = True
-            self.goal_p_m[inside, goal] = 0.0
-            if self.goal_cov is not None:
-                self.goal_cov[inside, goal] = 0.0
-            other = 1 - goal
-            arrived = inside & ((self.target == goal) | (self.target < 0))
-            self.target[arrived] = np.where(self.known[arrived, other], other, -1)
-            self.searching[arrived] = False
-
-    def _lost(self, area: np.ndarray) -> None:
-        if not self.searching.any():
-            return
-        lost = self.searching & (self.search_left_m <= 0.0) & (area != self.target)
-        if lost.any():
-            self.known[lost] = False
-            self.goal_p_m[lost] = 0.0
-            if self.goal_cov is not None:
-                self.goal_cov[lost] = 0.0
-            self.target[lost] = -1
-            self.searching[lost] = False
-            self.lost_count[lost] += 1
-
-    def _receive(self, inbox: Inbox) -> None:
-        """Fuse what neighbours sent (seed 000 eq. 14-16, 27).
-
-        Eq. 27 needs the range and both bearings of one crossing. A message sent at tick k-1
-        carries the sender's goals in its body frame of tick k-2 and the bearing at which it heard
-        us at tick k-2; we heard the sender at that same crossing, so our own range and bearing
-        from last tick's table, and our pose of then, complete the transform with no timing error.
-        """
-        m = inbox.receiver.shape[0]
-        if m == 0 or not self.strategy.communicates:
-            return
-        content = inbox.content
-        rank = _rank_within(inbox.receiver)
-        adopted = np.zeros((self.n, 2), bool)
-        for r in range(int(rank.max()) + 1):
-            idx = np.flatnonzero(rank == r)
-            rec = inbox.receiver[idx]
-            theirs = content.heard_ids[idx] == self.robot_ids[rec][:, None]
-            ours = self.heard_ids[rec] == inbox.sender_id[idx][:, None]
-            has = theirs.any(axis=1) & ours.any(axis=1)
-            if not has.any():
-                continue
-            idx, rec, theirs, ours = idx[has], rec[has], theirs[has], ours[has]
-            # One exchange per encounter: a recent partner that is still around is ignored, and
-            # stays ignored while we keep hearing it.
-            sender = inbox.sender_id[idx]
-            recent = (self.partner_ids[rec] == sender[:, None]) & (
-                self.partner_until[rec] > self.tick
+        encoder_steps = np.asarray(encoder_steps, float)
+        previous = self.pose
+        self.pose_history = (self.pose_history[1], previous)
+        self.pose = np.empty_like(previous)
+        in_kernel = self.goal_cov is None
+        if not in_kernel:
+            kernels.odometry(
+                previous, encoder_steps, self.body.metres_per_step, self.body.wheelbase_m,
+                self.search_left_m, self.goal_p_m, False, self.pose,
             )
-            slot = np.where(
-                recent.any(axis=1), recent.argmax(axis=1), self.partner_until[rec].argmin(axis=1)
+            # eq. 9-11 for each goal's covariance since the robot left it, then eq. 19.
+            du = encoder_steps * self.body.metres_per_step
+            k = self.config.odometry_k_m
+            cov = propagate_covariance(
+                self.goal_cov.reshape(-1, 3, 3), np.repeat(previous, 2, axis=0),
+                np.repeat(du[:, 0], 2), np.repeat(du[:, 1], 2), self.body.wheelbase_m, k, k,
             )
-            self.partner_ids[rec, slot] = sender
-            self.partner_until[rec, slot] = self.tick + self._gap_ticks
-            fresh = ~recent.any(axis=1)
-            if not fresh.any():
-                continue
-            idx, rec, theirs, ours = idx[fresh], rec[fresh], theirs[fresh], ours[fresh]
-            gamma_sender = content.heard_bearing_rad[idx, theirs.argmax(axis=1)]
-            slot = ours.argmax(axis=1)
-            gamma_own = self.heard_bearing_rad[rec, slot]
-            range_own = self.heard_range_m[rec, slot]
-            frame = self.pose_history[0][rec]
-            theta = frame[:, 2]
-            cos_t, sin_t = np.cos(theta), np.sin(theta)
-            for goal in (NEST, PREY):
-                ok = content.goal_known[idx, goal]
-                if not ok.any():
-                    continue
-                i, rr = idx[ok], rec[ok]
-                local = transform_received(
-                    range_own[ok],
-                    gamma_own[ok],
-                    gamma_sender[ok],
-                    content.goal_distance_m[i, goal],
-                    content.goal_angle_rad[i, goal],
-                )
-                x_other = frame[ok, :2] + np.stack(
-                    (
-                        cos_t[ok] * local[:, 0] - sin_t[ok] * local[:, 1],
-                        sin_t[ok] * local[:, 0] + cos_t[ok] * local[:, 1],
-                    ),
-                    axis=1,
-                )
-                p_other = content.goal_p_m[i, goal]
-                knew = self.known[rr, goal]
-                # eq. 14: a robot that does not know the goal takes the neighbour's estimate.
-                new = ~knew
-                self.goal_xy[rr[new], goal] = x_other[new]
-                self.goal_p_m[rr[new], goal] = p_other[new]
-                if self.goal_cov is not None:  # only the norm crossed the air: isotropic
-                    self.goal_cov[rr[new], goal] = p_other[new, None, None] * _XY_BLOCK
-                self.known[rr[new], goal] = True
-                adopted[rr[new], goal] = True
-                # eq. 15-16: both know it; single strategies fuse only the goal they head to.
-                fuse_mask = knew & (self.strategy.double | (self.target[rr] == goal))
-                if fuse_mask.any():
-                    rf = rr[fuse_mask]
-                    unit = self.config.confidence_unit_m
-                    x_new, p_new = self._fuse(
-                        self.goal_xy[rf, goal],
-                        self.goal_p_m[rf, goal] / unit,
-                        x_other[fuse_mask],
-                        p_other[fuse_mask] / unit,
-                    )
-                    if self.goal_cov is not None:  # eq. 22 on the whole matrix: P <- (1 - g) P
-                        old = self.goal_p_m[rf, goal] / unit
-                        scale = np.divide(p_new, old, out=np.zeros_like(p_new), where=old > 0)
-                        self.goal_cov[rf, goal] *= scale[:, None, None]
-                    self.goal_xy[rf, goal] = x_new
-                    self.goal_p_m[rf, goal] = p_new * unit
-        # A wandering robot recruited to a goal heads for it (seed 000 §6.1.1); of two, the nearer.
-        recruited = (self.target < 0) & adopted.any(axis=1)
-        if recruited.any():
-            dist = np.linalg.norm(self.goal_xy[recruited] - self.pose[recruited, None, :2], axis=2)
-            dist[~adopted[recruited]] = np.inf
-            self.target[recruited] = dist.argmin(axis=1)
-            self.searching[recruited] = False
-
-    def _remember_heard(self, inbox: Inbox) -> None:
-        """Keep the nearest neighbours heard this tick: their ids, range and bearing (measured at
-        the previous tick's poses, when the messages crossed)."""
-        k = self.config.heard_capacity
-        empty = inbox.receiver.shape[0] == 0 or k == 0
-        if empty and self._heard_clear:
-            return
-        self.heard_ids.fill(-1)
-        self.heard_bearing_rad.fill(0.0)
-        self.heard_range_m.fill(0.0)
-        self._heard_clear = empty
-        if empty:
-            return
-        order = np.lexsort((inbox.sender_id, inbox.range_m, inbox.receiver))
-        rec = inbox.receiver[order]
-        rank = _rank_within(rec)
-        keep = rank < k
-        rk, sk = rec[keep], rank[keep]
-        self.heard_ids[rk, sk] = inbox.sender_id[order][keep]
-        self.heard_bearing_rad[rk, sk] = _f32(inbox.bearing_rad[order][keep])
-        self.heard_range_m[rk, sk] = inbox.range_m[order][keep]
+            self.goal_cov = cov.reshape(self.n, 2, 3, 3)
+            self.goal_p_m = _spectral_norm_xy(self.goal_cov)
+        c = inbox.content
+        cov = self.goal_cov if self.goal_cov is not None else self._no_cov
+        strategy, body, cfg = self.strategy, self.body, self.config
+        adopted = self._adopted
+        resume, exp_z = kernels.DONE, 0.0
+        while True:
+            resume = kernels.brain_update(
+                in_kernel, encoder_steps, previous, body.metres_per_step, body.wheelbase_m,
+                self.pose, self.pose_history[0], self.robot_ids, self.known, self.goal_xy,
+                self.goal_p_m, cov, not in_kernel, self.target, self.searching,
+                self.search_left_m, self.lost_count, self.visit_ticks, self.turn_ticks,
+                self.straight_ticks, self.heard_ids, self.heard_bearing_rad, self.heard_range_m,
+                self.partner_ids, self.partner_until, adopted,
+                np.asarray(ground, float), GROUND_BLACK_BELOW, GROUND_GREY_BELOW, _GROUND_AHEAD_M,
+                self.tick,
+                inbox.receiver, inbox.sender_id, inbox.range_m, inbox.bearing_rad, inbox.rows(),
+                c.goal_known, c.goal_distance_m, c.goal_angle_rad, c.goal_p_m, c.heard_ids,
+                c.heard_bearing_rad,
+                strategy.communicates, strategy.double, self._gain, float(cfg.beta),
+                cfg.confidence_unit_m, self._gap_ticks, resume, exp_z, self._z,
+                self._geometry, self._need, self._n_need,
+            )
+            if resume == kernels.DONE:
+                break
+            exp_z = float(np.exp(self._z)[0])  # the Fermi gain's exp, numpy's (eq. 24)
+        self._heard_clear = not inbox.receiver.shape[0]
+        # Angles of the goal vectors, numpy's arctan2 (see agents/kernels.py).
+        self._atan = np.arctan2(self._geometry[1], self._geometry[0])
 
     def _wander_draws(self, need: np.ndarray) -> None:
-        """Start a new random-walk segment for robots in ``need``: a turn, then a straight run."""
-        lo, hi = self.config.wander_straight_s
-        for i in np.flatnonzero(need):
-            angle, straight_s = self.rngs[i].uniform((-math.pi, lo), (math.pi, hi))
+        """Start a new random-walk segment for robots in ``need``: a turn, then a straight run.
+
+        ``uniform((-pi, lo), (pi, hi))`` of each robot's own generator, written as ``low +
+        (high - low) * random()``, which is how numpy computes it (same numbers, less overhead).
+        """
+        low, span = self._wander_low, self._wander_span
+        for i in need.tolist():
+            u = self.rngs[i].random(2)
+            angle = low[0] + span[0] * u[0]
+            straight_s = low[1] + span[1] * u[1]
             self.turn_ticks[i] = round(abs(angle) / self._spin_rad_per_tick)
             self.turn_dir[i] = 1.0 if angle >= 0 else -1.0
             self.straight_ticks[i] = round(straight_s / self.tick_s)
 
     def _motors(self, ir: np.ndarray) -> np.ndarray:
+        """Forage (steer to the target's estimate), wander (random walk), avoid (seed 000 §5)."""
         cfg = self.config
-        cruise, spin = cfg.cruise_speed_steps_s, cfg.turn_speed_steps_s
-
-        # forage: steer to the target's estimate (err stays 0 for robots without a target)
-        going = self.target >= 0
-        if going.any():
-            g = self.goal_xy[self._rows, np.maximum(self.target, 0)]
-            delta = g - self.pose[:, :2]
-            dist = np.hypot(delta[:, 0], delta[:, 1])
-            err = wrap_angle(np.arctan2(delta[:, 1], delta[:, 0]) - self.pose[:, 2])
-            start = going & ~self.searching & (dist < cfg.arrival_tolerance_m)
-            if start.any():
-                self.searching[start] = True
-                self.search_left_m[start] = cfg.search_overshoot_m
-            err[self.searching | ~going] = 0.0
-            in_place = going & (np.abs(err) > cfg.turn_in_place_rad)
-            spin_dir = np.sign(err)
-        else:
-            err = np.zeros(self.n)
-            in_place = np.zeros(self.n, bool)
-            spin_dir = err
-        # wander: random walk
-        wandering = ~going
-        if wandering.any():
-            need = wandering & (self.turn_ticks <= 0) & (self.straight_ticks <= 0)
-            if need.any():
-                self._wander_draws(need)
-            turning = wandering & (self.turn_ticks > 0)
-            self.turn_ticks[turning] -= 1
-            self.straight_ticks[wandering & ~turning] -= 1
-            if turning.any():
-                spin_dir = np.where(turning, self.turn_dir, spin_dir)
-                in_place = in_place | turning
-
-        steer = np.clip(cfg.steering_gain * err, -1.0, 1.0)
-        cmd = np.empty((self.n, 2))
-        cmd[:, 0] = cruise * (1.0 - steer)
-        cmd[:, 1] = cruise * (1.0 + steer)
-        if in_place.any():
-            cmd[in_place, 0] = -spin * spin_dir[in_place]
-            cmd[in_place, 1] = spin * spin_dir[in_place]
-
-        # avoid: subsumes the layers below
-        avoiding = (ir > cfg.avoid_threshold).any(axis=1)
-        if avoiding.any():
-            vx = ir[avoiding] @ _COS_IR
-            vy = ir[avoiding] @ _SIN_IR
-            obstacle = np.arctan2(vy, vx)
-            ahead = np.abs(obstacle) < math.pi / 2
-            away = np.where(obstacle > 0, -1.0, 1.0)  # obstacle on the left: turn right
-            c = np.empty((avoiding.sum(), 2))
-            c[:, 0] = np.where(ahead, -spin * away, cruise)
-            c[:, 1] = np.where(ahead, spin * away, cruise)
-            cmd[avoiding] = c
-        vmax = self.body.max_wheel_speed_steps_s
-        return np.clip(cmd, -vmax, vmax, out=cmd)
-
-    def _outgoing(self) -> SocialMessages:
-        if not self.strategy.communicates:
-            return self._silent
-        # Goals in the body frame of the previous tick, the frame the heard bearings were measured
-        # in: the receiver then combines measurements of one and the same crossing.
-        frame = self.pose_history[1]
-        delta = self.goal_xy - frame[:, None, :2]
-        distance = np.hypot(delta[..., 0], delta[..., 1])
-        angle = wrap_angle(np.arctan2(delta[..., 1], delta[..., 0]) - frame[:, None, 2])
-        return SocialMessages(
-            goal_known=self.known.copy(),
-            goal_distance_m=_f32(np.where(self.known, distance, 0.0)),
-            goal_angle_rad=_f32(np.where(self.known, angle, 0.0)),
-            goal_p_m=_f32(np.where(self.known, self.goal_p_m, 0.0)),
-            heard_ids=self.heard_ids.copy(),
-            heard_bearing_rad=self.heard_bearing_rad.copy(),
+        n_need = int(self._n_need[0])
+        if n_need:
+            self._wander_draws(self._need[:n_need])
+        # The send layer needs the same angles: its report (see _report) comes in the same call.
+        communicates = self.strategy.communicates
+        cmd, *fields, state, pose = kernels.act(
+            self.pose, self.target, self.searching, self.search_left_m, self.turn_ticks,
+            self.straight_ticks, self.turn_dir, self._geometry, self._atan,
+            np.asarray(ir, float), _COS_IR, _SIN_IR, cfg.cruise_speed_steps_s,
+            cfg.turn_speed_steps_s, cfg.steering_gain, cfg.turn_in_place_rad,
+            cfg.arrival_tolerance_m, cfg.search_overshoot_m, cfg.avoid_threshold,
+            self.body.max_wheel_speed_steps_s, self.pose_history[1], self.known, self.goal_p_m,
+            self.heard_ids, self.heard_bearing_rad, communicates, KNOWS_BOTH,
         )
+        self._reported = (SocialMessages(*fields) if communicates else self._silent), state, pose
+        return cmd
+
+    def _report(self) -> tuple[SocialMessages, np.ndarray, np.ndarray]:
+        """The messages the robots send, their state codes and dead-reckoned poses.
+
+        Goals are sent in the body frame of the previous tick, the frame the heard bearings were
+        measured in: the receiver then combines measurements of one and the same crossing.
+        """
+        communicates = self.strategy.communicates
+        *fields, state, pose = kernels.report(
+            self.pose_history[1], self._geometry, self._atan, self.known, self.goal_p_m,
+            self.heard_ids, self.heard_bearing_rad, communicates, self.target, KNOWS_BOTH, self.pose,
+        )
+        return (SocialMessages(*fields) if communicates else self._silent), state, pose
 
     def state_codes(self) -> np.ndarray:
-        target_code = np.where(self.target < 0, TARGET_NONE, self.target + 1)
-        return target_code | np.where(self.known.all(axis=1), KNOWS_BOTH, 0)
+        return kernels.state_codes(self.target, self.known, KNOWS_BOTH)
 
     # -- the contract ------------------------------------------------------------------------
 
@@ -622,17 +490,14 @@ class ForagingBrain:
     ) -> BrainOutput:
         """One controller tick for every robot of the batch (10 Hz on the e-puck)."""
         self.tick += 1
-        self._odometry(encoder_steps)
-        area = classify_ground(ground)
-        self._arrive(area)
-        self._lost(area)
-        self._receive(inbox)
-        self._remember_heard(inbox)
+        self._reported = None
+        self._update(encoder_steps, ground, inbox)
         cmd = self._motors(ir)
+        messages, state, pose_estimate = self._reported or self._report()
         return BrainOutput(
             wheel_speed_steps_s=cmd,
             sending=self._sending,
-            messages=self._outgoing(),
-            state=self.state_codes(),
-            pose_estimate=self.pose.copy(),
+            messages=messages,
+            state=state,
+            pose_estimate=pose_estimate,
         )

@@ -29,7 +29,8 @@ def inbox_from(observation: Observation, sent: BrainOutput | None, robot_ids: np
         sender_id=robot_ids[d.sender],
         range_m=d.range_m,
         bearing_rad=d.bearing_rad,
-        content=sent.messages.take(d.sender),
+        content=sent.messages,  # every robot's message; each delivery reads its sender's row
+        content_row=d.sender,
     )
 
 

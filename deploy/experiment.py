@@ -30,6 +30,10 @@ strategy, beta, robots, duration_s, seed, replication, one column per grid key),
 seed 000 §6 (recruitment_time_s, empty if not reached; robots_found_both; round_trips_total;
 on_path_fraction_mean; lost_total), wall_s, and config_hash (the scenario without its seed): a
 file whose rows were made with another configuration is refused rather than mixed.
+
+A spec with ``family = "laser"`` runs the laser robots (seeds 002-003) instead: its scenarios are
+laser scenarios, and ``deploy/laser_experiment.py`` builds its settings, runs its jobs and gives
+its columns (:data:`FAMILIES`); the spec format, plan, pool, resume and progress are these.
 """
 
 from __future__ import annotations
@@ -38,6 +42,7 @@ import csv
 import dataclasses
 import difflib
 import hashlib
+import importlib
 import io
 import itertools
 import json
@@ -70,6 +75,15 @@ LEAD_COLUMNS = ("experiment", "group", "setting", "scenario", "strategy", "beta"
                 "duration_s", "seed", "replication")
 METRIC_COLUMNS = ("recruitment_time_s", "robots_found_both", "round_trips_total",
                   "on_path_fraction_mean", "lost_total", "wall_s", "config_hash")
+#: Robot families an experiment can run: None for the e-puck family of this module, else the
+#: module (imported when needed) whose ``settings(spec)``, ``run_job(job)``, ``columns(spec)``
+#: and ``row(spec, job, out)`` replace this module's.
+FAMILIES = {"epuck": None, "laser": "swarmloc.deploy.laser_experiment"}
+
+
+def _family(name: str):
+    target = FAMILIES[name]
+    return None if target is None else importlib.import_module(target)
 
 
 # -- the spec ---------------------------------------------------------------------------------
@@ -198,10 +212,14 @@ class ExperimentSpec:
     replications: int = 30
     seed: int = 1
     group: tuple[GroupSpec, ...] = ()
+    #: Which robots the scenarios are (a key of :data:`FAMILIES`).
+    family: str = "epuck"
 
     def __post_init__(self):
         if not _NAME.match(self.name):
             raise ValueError(f"name: expected letters, digits, '_' or '-', got {self.name!r}")
+        if self.family not in FAMILIES:
+            raise ValueError(f"family: expected one of {', '.join(FAMILIES)}, got {self.family!r}")
         if self.replications < 1:
             raise ValueError(f"replications: must be >= 1, got {self.replications}")
         if not (0 <= self.seed and self.seed + self.replications - 1 < 2**63):
@@ -226,6 +244,9 @@ class ExperimentSpec:
 
     def columns(self) -> list[str]:
         """The header of the results file."""
+        module = _family(self.family)
+        if module is not None:
+            return module.columns(self)
         return [*LEAD_COLUMNS, *self.grid_keys(), *METRIC_COLUMNS]
 
 
@@ -290,6 +311,8 @@ class Setting:
     robots: int
     duration_s: float
     strategy: str
+    #: Relative cost of one replication (0: robots x ticks of 0.1 s).
+    cost: int = 0
 
 
 @dataclass(frozen=True)
@@ -306,6 +329,7 @@ class Job:
     config_hash: str = ""
     #: Robot-ticks: the relative cost used to weigh progress.
     cost: int = 1
+    family: str = "epuck"
 
 
 def _config_hash(scenario: Scenario) -> str:
@@ -317,6 +341,9 @@ def _config_hash(scenario: Scenario) -> str:
 
 def settings(spec: ExperimentSpec) -> list[Setting]:
     """Every setting of the spec, each scenario built once: any error names group and setting."""
+    module = _family(spec.family)
+    if module is not None:
+        return module.settings(spec)
     out = []
     for g in spec.group:
         fixed = [f"{k}={_override_text(v)}" for k, v in g.set]
@@ -347,7 +374,7 @@ def plan(spec: ExperimentSpec) -> list[Job]:
         for r in range(spec.replications):
             seed = spec.seed + r
             jobs.append(Job(s.id, s.group, s.scenario, (*s.overrides, f"world.seed={seed}"), seed, r,
-                            s.grid, s.config_hash, s.robots * ticks))
+                            s.grid, s.config_hash, s.cost or s.robots * ticks, spec.family))
     return jobs
 
 
@@ -361,6 +388,9 @@ def _init_worker() -> None:
 
 def run_job(job: Job) -> dict:
     """Run one replication with the batch engine; a flat dict of what the row needs."""
+    module = _family(job.family)
+    if module is not None:
+        return module.run_job(job)
     from swarmloc.deploy.batch import run_batch
 
     t0 = time.perf_counter()
@@ -391,6 +421,9 @@ def _csv_line(values: list) -> bytes:
 
 
 def _row(spec: ExperimentSpec, job: Job, out: dict) -> list:
+    module = _family(spec.family)
+    if module is not None:
+        return module.row(spec, job, out)
     grid = dict(job.grid)
     return [spec.name, job.group, job.setting, job.scenario, out["strategy"], out["beta"],
             out["robots"], out["duration_s"], job.seed, job.replication,

@@ -35,10 +35,15 @@ STATE_TARGET_MASK = 3
 STATE_KNOWS_BOTH = 4
 
 
+#: on_path of every state code 0..7 (bits 0-2), looked up rather than computed: one numpy call.
+_ON_PATH_BY_CODE = np.array(
+    [(code & STATE_TARGET_MASK) != 0 and (code & STATE_KNOWS_BOTH) != 0 for code in range(8)]
+)
+
+
 def on_path(state: np.ndarray) -> np.ndarray:
     """Robots that forage between the two areas (seed 000 §6.1.3): a target and both known."""
-    state = np.asarray(state)
-    return ((state & STATE_TARGET_MASK) != 0) & ((state & STATE_KNOWS_BOTH) != 0)
+    return _ON_PATH_BY_CODE[np.asarray(state) & (STATE_TARGET_MASK | STATE_KNOWS_BOTH)]
 
 
 def ground_sensor_point(pose: np.ndarray) -> np.ndarray:

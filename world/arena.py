@@ -7,8 +7,9 @@ white floor and two circular goal areas: the *nest* (central place), painted bla
 
 Physics is kinematic, as is usual for e-puck swarm simulators at 10 Hz: after the world moves the
 bodies, :func:`resolve_collisions` pushes overlapping discs apart along their centre line and
-clamps every body inside the walls. It is deterministic and vectorised (a KD-tree gives the
-overlapping pairs, ``np.bincount`` sums the pushes), so it scales to thousands of robots.
+clamps every body inside the walls. It is deterministic and scales to thousands of robots: a
+compiled kernel on a spatial hash grid (``world/kernels.py``), with a vectorised KD-tree version
+(``np.bincount`` sums the pushes) for crowds, where the order of the sums is the KD-tree's.
 
 Coordinates: metres, walls at ``x = 0``, ``x = width_m``, ``y = 0``, ``y = height_m``.
 """
@@ -20,6 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial import cKDTree
+
+from swarmloc.world import kernels
 
 #: Ground reflectance of the three floor colours (dimensionless, white = 1).
 GROUND_WHITE = 1.0
@@ -96,6 +99,14 @@ class Arena:
                 f"prey disc overlaps nest disc (centre distance {gap_m} m < sum of radii "
                 f"{self.nest.radius_m + self.prey.radius_m} m)"
             )
+        discs = np.array([*self.nest.centre_m, self.nest.radius_m, *self.prey.centre_m, self.prey.radius_m])
+        discs.flags.writeable = False
+        object.__setattr__(self, "_discs", discs)
+
+
+def arena_discs(arena: Arena) -> np.ndarray:
+    """``(nest x, y, radius, prey x, y, radius)`` in metres: the arena as the kernels take it."""
+    return arena._discs
 
 
 def _inside(points_m: np.ndarray, disc: Disc) -> np.ndarray:
@@ -116,12 +127,13 @@ def area_at(points_m: np.ndarray, arena: Arena) -> np.ndarray:
     return out
 
 
-_REFLECTANCE_BY_AREA = np.array([GROUND_WHITE, GROUND_BLACK, GROUND_GREY])
+#: Floor reflectance by area code (AREA_NONE, AREA_NEST, AREA_PREY).
+REFLECTANCE_BY_AREA = np.array([GROUND_WHITE, GROUND_BLACK, GROUND_GREY])
 
 
 def ground_reflectance(points_m: np.ndarray, arena: Arena) -> np.ndarray:
     """True floor reflectance at points ``(..., 2)``: black nest, grey prey, white elsewhere."""
-    return _REFLECTANCE_BY_AREA[area_at(points_m, arena)]
+    return REFLECTANCE_BY_AREA[area_at(points_m, arena)]
 
 
 def resolve_collisions(
@@ -132,6 +144,44 @@ def resolve_collisions(
     iterations: int = 2,
 ) -> np.ndarray:
     """Separate overlapping bodies and keep them inside the walls; returns a new ``(N, 2)`` array.
+
+    Each iteration: every pair whose centres are closer than ``2 * radius_m`` is pushed apart
+    along the centre line by the overlap, split evenly between the two bodies, or all of it to
+    the movable one if only one is movable (none if neither is). All pushes of an iteration are
+    computed from the same positions and summed (Jacobi style), so a lone overlapping pair ends
+    exactly ``2 * radius_m`` apart after one iteration; crowds need more iterations. Then every
+    movable body is clamped into ``[radius_m, width_m - radius_m] x [radius_m, height_m -
+    radius_m]``. Bodies with ``movable=False`` are never moved, not even by the clamp. Two bodies
+    at exactly the same centre are split along the x axis (lower index to -x). Deterministic: no
+    randomness.
+
+    When every body is movable (the world's case) a compiled kernel does the work on a cell grid
+    (``world/kernels.py``); it hands over to the vectorised KD-tree version, which defines the
+    summation order of the pushes, whenever a body overlaps three or more others at once.
+    """
+    pos = np.array(position_m, dtype=float, copy=True)
+    if pos.ndim != 2 or pos.shape[1] != 2:
+        raise ValueError(f"position_m must have shape (N, 2), got {pos.shape}")
+    if iterations < 0:
+        raise ValueError(f"iterations must be >= 0, got {iterations}")
+    if movable is None or bool(np.all(movable)):
+        if np.shape(movable) not in ((), (pos.shape[0],)):
+            raise ValueError(f"movable must have shape ({pos.shape[0]},), got {np.shape(movable)}")
+        fast = pos.copy()
+        if kernels.separate_bodies(fast, float(radius_m), arena.width_m, arena.height_m, int(iterations)):
+            return fast
+    return _resolve_collisions_kdtree(pos, radius_m, arena, movable, iterations)
+
+
+def _resolve_collisions_kdtree(
+    position_m: np.ndarray,
+    radius_m: float,
+    arena: Arena,
+    movable: np.ndarray | None = None,
+    iterations: int = 2,
+) -> np.ndarray:
+    """:func:`resolve_collisions` in numpy: overlapping pairs from a KD-tree, pushes summed with
+    ``np.bincount`` in pair order.
 
     Each iteration: every pair whose centres are closer than ``2 * radius_m`` (found with a
     KD-tree) is pushed apart along the centre line by the overlap, split evenly between the two

@@ -13,23 +13,41 @@ Per tick ``k`` (lockstep, seed 000 §5 controller clock of 10 Hz):
    non-systematic error of seed 000 eq. 10 with the +-20 % uniform slip of seed 001 §4.1); then
    collisions are resolved and the foraging metrics updated.
 
-The world owns all physical randomness, one generator drawn in a fixed order, so that a seeded
-run is the same whether the agents are processes or the batch engine's arrays. A dead robot
+The world owns all physical randomness, one generator drawn in a fixed order (IR noise, ground
+noise; loss, range noise, bearing noise, slip), so that a seeded run is the same whether the
+agents are processes or the batch engine's arrays. Consecutive draws are merged into one
+``rng.random`` call where that gives the same numbers (see ``world/kernels.py``: ``uniform``), and
+the per-robot loops run in the compiled kernels of ``world/kernels.py``. A dead robot
 (``alive`` false) stands still, sends nothing and hears nothing; it stays an obstacle.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from swarmloc.protocol.epuck import EpuckBody, ground_sensor_point, integrate_pose
+from swarmloc.protocol.epuck import GROUND_SENSOR_OFFSETS_M, IR_SENSOR_ANGLES_RAD, EpuckBody
 from swarmloc.protocol.messages import MAX_RAB_PAYLOAD_BYTES, MAX_RECEIVED
-from swarmloc.world.arena import Arena, Disc, area_at, resolve_collisions
-from swarmloc.world.medium import Deliveries, RabMedium, deliver
+from swarmloc.world import kernels
+from swarmloc.world.arena import (
+    REFLECTANCE_BY_AREA,
+    Arena,
+    Disc,
+    arena_discs,
+    resolve_collisions,
+)
+from swarmloc.world.medium import Deliveries, RabMedium, crossing, deliver
 from swarmloc.world.metrics import ForagingMetrics
-from swarmloc.world.sensors import SensorParams, ground_sensors, ir_proximity
+from swarmloc.world.sensors import SensorParams
+
+_COS_IR = np.cos(IR_SENSOR_ANGLES_RAD)
+_SIN_IR = np.sin(IR_SENSOR_ANGLES_RAD)
+_N_IR = IR_SENSOR_ANGLES_RAD.shape[0]
+_N_GROUND = GROUND_SENSOR_OFFSETS_M.shape[0]
+_NO_PAIRS = np.empty(0, np.int64)
+#: Collision-resolution iterations per tick (resolve_collisions' default).
+_COLLISION_ITERATIONS = 2
 
 #: Stream id of the world's generator (``[seed, stream]``); agents use stream 1 with their id.
 WORLD_STREAM = 0
@@ -154,6 +172,24 @@ def initial_poses(config: WorldConfig, rng: np.random.Generator) -> np.ndarray:
     return pose
 
 
+_kernels_loaded = False
+
+
+def _load_kernels(config: WorldConfig) -> None:
+    """Load (or, the first time on a machine, compile) the world's kernels now, once per process,
+    by stepping a throwaway two-robot world of the same configuration with its own generator: at
+    the first observe(), so that a world-server answers joins at once and, in real time, pays
+    the loading on one tick instead of spreading it over the first few."""
+    global _kernels_loaded
+    if _kernels_loaded:
+        return
+    _kernels_loaded = True
+    robots = 2 if 2 * np.pi * config.body.body_radius_m**2 <= 0.5 * config.arena.width_m * config.arena.height_m else 1
+    world = ForagingWorld(replace(config, robots=robots), np.random.default_rng(0))
+    world.observe()
+    world.step(np.zeros((robots, 2)), np.ones(robots, bool), np.zeros(robots, bool))
+
+
 class ForagingWorld:
     """The e-puck foraging world over a batch of robots."""
 
@@ -168,6 +204,12 @@ class ForagingWorld:
         self.encoder_steps = np.zeros((n, 2))
         self._deliveries = deliver(self.pose, np.zeros(n, bool), config.medium, self.rng)
         self.metrics = ForagingMetrics(n, config.tick_s)
+        self._n_ticks = config.n_ticks
+        self._pairs: tuple = (None, None)  # (poses, neighbour pairs found at them by observe())
+        # Pairs for the IR sensors, the medium and the collisions of the step after.
+        self._pair_cutoff_m = max(
+            config.medium.range_m, 2.0 * config.body.body_radius_m + config.sensors.ir_range_m
+        )
 
     @property
     def n_robots(self) -> int:
@@ -175,12 +217,25 @@ class ForagingWorld:
 
     @property
     def done(self) -> bool:
-        return self.tick >= self.config.n_ticks
+        return self.tick >= self._n_ticks
 
     def observe(self) -> Observation:
+        if self.tick == 0:
+            _load_kernels(self.config)
         cfg = self.config
-        ir = ir_proximity(self.pose, cfg.body.body_radius_m, self.arena, cfg.sensors, self.rng)
-        ground = ground_sensors(self.pose, self.arena, cfg.sensors, self.rng)
+        # ir_proximity and ground_sensors (world/sensors.py) in one kernel call, with one
+        # random() call for both noises: the same numbers, in the same order, as their two
+        # uniform() calls. The robot pairs it finds are those that the medium and the collisions
+        # of step() need at these same poses: kept.
+        n = self.n_robots
+        f, g = cfg.sensors.ir_noise_fraction, cfg.sensors.ground_noise_fraction
+        ir, ground, pairs = kernels.sense(
+            self.pose, cfg.body.body_radius_m, cfg.sensors.ir_range_m, self.arena.width_m,
+            self.arena.height_m, _COS_IR, _SIN_IR, -f, f - -f, GROUND_SENSOR_OFFSETS_M,
+            arena_discs(self.arena), REFLECTANCE_BY_AREA, -g, g - -g,
+            self.rng.random(n * (_N_IR + _N_GROUND)), self._pair_cutoff_m,
+        )
+        self._pairs = (self.pose, pairs)
         deliveries = self._deliveries
         if not self.alive.all() and deliveries.receiver.shape[0]:
             keep = self.alive[deliveries.receiver]
@@ -195,25 +250,44 @@ class ForagingWorld:
     def step(self, wheel_speed_steps_s: np.ndarray, sending: np.ndarray, on_path: np.ndarray):
         """Apply one tick of wheel commands ``(N, 2)`` (steps/s, left and right)."""
         cfg = self.config
-        vmax = cfg.body.max_wheel_speed_steps_s
-        cmd = np.clip(np.asarray(wheel_speed_steps_s, float), -vmax, vmax)
-        cmd[~self.alive] = 0.0
+        cmd = np.asarray(wheel_speed_steps_s, float)
+        if cmd.shape != (self.n_robots, 2):
+            raise ValueError(f"wheel_speed_steps_s: expected shape ({self.n_robots}, 2), got {cmd.shape}")
         # The board measures range and bearing when the message crosses, at the poses the
-        # senders computed their content from; receivers hear it at the next tick.
+        # senders computed their content from; receivers hear it at the next tick. The medium's
+        # draws (world/medium.py: deliver) come first, then the slip of each wheel, as
+        # U(-slip, slip), the non-systematic odometry error: one random() call for the range and
+        # bearing noises and the slips gives the same numbers as three uniform() calls.
         sending = np.asarray(sending, bool) & self.alive
-        self._deliveries = deliver(self.pose, sending, cfg.medium, self.rng)
-        encoder = cmd * cfg.tick_s
+        pairs = self._pairs[1] if self._pairs[0] is self.pose else None
+        crossed = crossing(self.pose, sending, cfg.medium, self.rng, pairs)
+        k, n = crossed.sender.shape[0], self.n_robots
+        u = self.rng.random(2 * k + 2 * n)
+        rn, bn = cfg.medium.range_noise_m, cfg.medium.bearing_noise_rad
         slip = cfg.odometry.slip_fraction
-        factor = 1.0 + self.rng.uniform(-slip, slip, size=encoder.shape)
-        travel_m = encoder * cfg.body.metres_per_step * factor
-        pose = integrate_pose(self.pose, travel_m[:, 0], travel_m[:, 1], cfg.body.wheelbase_m)
-        pose[:, :2] = resolve_collisions(pose[:, :2], cfg.body.body_radius_m, self.arena)
+        # Then, in one kernel call: the boards' measurements, the encoders (commanded steps) and
+        # the true motion ((1 + u) times that, eq. 3-7), collisions (world/arena.py:
+        # resolve_collisions) and, for the metrics, the true area under each robot's (middle)
+        # ground sensor.
+        discs = arena_discs(self.arena)
+        ahead_m = GROUND_SENSOR_OFFSETS_M[1, 0]
+        pose, encoder, area, ok, range_m, bearing_rad = kernels.advance(
+            self.pose, cmd, self.alive, cfg.body.max_wheel_speed_steps_s, cfg.tick_s,
+            cfg.body.metres_per_step, -slip, slip - -slip, cfg.body.wheelbase_m, cfg.body.body_radius_m,
+            self.arena.width_m, self.arena.height_m, _COLLISION_ITERATIONS, ahead_m, discs,
+            crossed.dist_m, crossed.bearing_atan(), crossed.receiver_theta, -rn, rn - -rn, -bn, bn - -bn, u,
+            *((pairs[0], pairs[1], self._pair_cutoff_m) if pairs is not None else (_NO_PAIRS, _NO_PAIRS, 0.0)),
+        )
+        self._deliveries = Deliveries(crossed.sender, crossed.receiver, range_m, bearing_rad)
+        if not ok:  # a crowd: resolve_collisions' own (KD-tree) path
+            pose[:, :2] = resolve_collisions(
+                pose[:, :2], cfg.body.body_radius_m, self.arena, iterations=_COLLISION_ITERATIONS
+            )
+            area = kernels.sensor_areas(pose, ahead_m, discs)
         self.pose = pose
         self.encoder_steps = encoder
         self.tick += 1
-        # A robot is at an area when its (middle) ground sensor truly is over it.
-        sensor = ground_sensor_point(pose)
-        self.metrics.update(self.tick, area_at(sensor, self.arena), on_path & self.alive)
+        self.metrics.update(self.tick, area, on_path & self.alive)
 
     def kill(self, index: int) -> None:
         """The robot's agent is gone: it stands still from now on."""

@@ -13,14 +13,19 @@ Two limits of the real board are modelled: a payload cap (``max_payload_bytes``:
 carries about 5 kbit/s, ~62 bytes per 100 ms tick; enforcing it on payloads is the caller's job)
 and a decoding cap (``max_received_per_tick``): a receiver keeps only the nearest few messages.
 
-:func:`deliver` works on the whole swarm at once: candidate pairs come from a KD-tree, never from
-a loop over robots. Random draws, in this fixed order:
+:func:`deliver` works on the whole swarm at once: candidate pairs come from a spatial hash grid
+in a compiled kernel (``world/kernels.py``), never from a Python loop over robots. Random draws,
+in this fixed order:
 
 1. ``rng.random(M)``: one loss uniform per candidate (sender, receiver) pair, candidates sorted
    by (receiver, sender); a candidate is lost if its uniform is ``< loss_probability``;
 2. ``rng.uniform(-range_noise_m, range_noise_m, K)``: range noise of the K kept messages, sorted
    by (receiver, sender);
 3. ``rng.uniform(-bearing_noise_rad, bearing_noise_rad, K)``: bearing noise, same order.
+
+Draws 2 and 3 are taken as one ``rng.random(2 K)`` call, which yields the very same numbers
+(``uniform(lo, hi)`` is ``lo + (hi - lo) * random()`` in numpy); the world takes them together with
+its slip draw (``ForagingWorld.step``), still in this order.
 """
 
 from __future__ import annotations
@@ -29,9 +34,8 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import cKDTree
 
-from swarmloc.protocol.epuck import wrap_angle
+from swarmloc.world import kernels
 
 
 def _is_number(value) -> bool:
@@ -143,6 +147,44 @@ def deliver(
     receivers: the caller passes ``sending=False`` for dead robots and drops dead receivers.
     See the module docstring for the fixed order of random draws.
     """
+    survivors = crossing(pose, sending, medium, rng)
+    k = survivors.sender.shape[0]
+    if k == 0:
+        return _empty()  # nothing survived: no noise to draw
+    # 2. Range noise, 3. bearing noise, both in (receiver, sender) order: one random(2K) call
+    # gives the same numbers as uniform(K) twice (world/kernels.py: uniform).
+    rn, bn = medium.range_noise_m, medium.bearing_noise_rad
+    range_m, bearing_rad = kernels.rab_measure(
+        survivors.dist_m, rng.random(2 * k), -rn, rn - -rn, survivors.bearing_atan(),
+        survivors.receiver_theta, -bn, bn - -bn,
+    )
+    return Deliveries(sender=survivors.sender, receiver=survivors.receiver, range_m=range_m, bearing_rad=bearing_rad)
+
+
+@dataclass(frozen=True, eq=False)
+class Survivors:
+    """Messages that crossed (survived loss and the decoding cap), before the boards measure them:
+    true distance, sender minus receiver position, and the receiver's heading; ``(K,)`` each."""
+
+    sender: np.ndarray
+    receiver: np.ndarray
+    dist_m: np.ndarray
+    rel_x_m: np.ndarray
+    rel_y_m: np.ndarray
+    receiver_theta: np.ndarray
+
+    def bearing_atan(self) -> np.ndarray:
+        """World-frame direction of each sender seen from its receiver (numpy's arctan2)."""
+        return np.arctan2(self.rel_y_m, self.rel_x_m)
+
+
+def crossing(
+    pose: np.ndarray, sending: np.ndarray, medium: RabMedium, rng: np.random.Generator, pairs=None
+) -> Survivors:
+    """The first half of :func:`deliver`: candidates, loss (draw 1) and the decoding cap. The
+    caller draws the measurement noises next (:func:`deliver`, or ``ForagingWorld.step``, which
+    draws them together with the odometry slip). ``pairs``: the ``world.kernels.neighbour_pairs``
+    of these very poses within at least ``medium.range_m``, if the caller has them already."""
     pose = np.asarray(pose, dtype=float)
     if pose.ndim != 2 or pose.shape[1] != 3:
         raise ValueError(f"pose must have shape (N, 3), got {pose.shape}")
@@ -150,67 +192,23 @@ def deliver(
     sending = np.asarray(sending, dtype=bool)
     if sending.shape != (n,):
         raise ValueError(f"sending must have shape ({n},), got {sending.shape}")
-    xy = pose[:, :2]
 
+    # Candidates from a cell grid (world/kernels.py), already in (receiver, sender) order.
     if n >= 2 and sending.any():
-        tree = cKDTree(xy, balanced_tree=False, compact_nodes=False)
-        pairs = tree.query_pairs(medium.range_m, output_type="ndarray")
+        if pairs is None:
+            sender, receiver, dist_m, rel_x, rel_y = kernels.rab_candidates(pose, sending, medium.range_m)
+        else:
+            sender, receiver, dist_m, rel_x, rel_y = kernels.rab_candidates_from_pairs(
+                pose, sending, medium.range_m, *pairs
+            )
     else:
-        pairs = np.empty((0, 2), dtype=np.int64)
-    a = pairs[:, 0].astype(np.int64)
-    b = pairs[:, 1].astype(np.int64)
-    a_sends, b_sends = sending[a], sending[b]
-    sender = np.concatenate([a[a_sends], b[b_sends]])
-    receiver = np.concatenate([b[a_sends], a[b_sends]])
-    order = np.argsort(receiver * n + sender)  # (receiver, sender) order; keys are unique
-    sender, receiver = sender[order], receiver[order]
-    x_m, y_m = pose[:, 0], pose[:, 1]
-    rel = np.column_stack([x_m[sender] - x_m[receiver], y_m[sender] - y_m[receiver]])
-    dist_m = np.hypot(rel[:, 0], rel[:, 1])
-    inside = dist_m <= medium.range_m  # guard against KD-tree rounding at the boundary
-    if not inside.all():
-        sender, receiver, rel, dist_m = (
-            sender[inside],
-            receiver[inside],
-            rel[inside],
-            dist_m[inside],
-        )
+        sender = receiver = np.empty(0, np.int64)
+        dist_m = rel_x = rel_y = np.empty(0)
 
-    # 1. Loss, one uniform per candidate in (receiver, sender) order.
-    survive = rng.random(sender.shape[0]) >= loss_probability(dist_m, medium)
-    sender, receiver, rel, dist_m = (
-        sender[survive],
-        receiver[survive],
-        rel[survive],
-        dist_m[survive],
-    )
-    if sender.shape[0] == 0:
-        return _empty()  # nothing survived: no noise to draw
-
-    # Decoding cap: a receiver with more survivors than the cap keeps the nearest ones, ties by
-    # sender index. Only the (usually few) over-full receivers are ranked.
-    cap = medium.max_received_per_tick
-    full = np.bincount(receiver, minlength=n) > cap
-    crowded = full[receiver]
-    if crowded.any():
-        rows = np.flatnonzero(crowded)  # still in (receiver, sender) order
-        # Stable sort by distance, then stable by receiver: order (receiver, distance, sender).
-        by_dist = rows[np.argsort(dist_m[rows], kind="stable")]
-        by_near = by_dist[np.argsort(receiver[by_dist], kind="stable")]
-        recv_sorted = receiver[by_near]
-        starts = np.flatnonzero(np.r_[True, recv_sorted[1:] != recv_sorted[:-1]])
-        group_start = np.repeat(starts, np.diff(np.r_[starts, recv_sorted.shape[0]]))
-        rank = np.arange(recv_sorted.shape[0]) - group_start
-        keep = ~crowded
-        keep[by_near[rank < cap]] = True
-        sender, receiver, rel, dist_m = sender[keep], receiver[keep], rel[keep], dist_m[keep]
-
-    k = sender.shape[0]
-    # 2. Range noise, 3. bearing noise, both in (receiver, sender) order.
-    range_noise = rng.uniform(-medium.range_noise_m, medium.range_noise_m, size=k)
-    bearing_noise = rng.uniform(-medium.bearing_noise_rad, medium.bearing_noise_rad, size=k)
-    range_m = np.maximum(dist_m + range_noise, 0.0)
-    bearing_rad = wrap_angle(np.arctan2(rel[:, 1], rel[:, 0]) - pose[receiver, 2] + bearing_noise)
-    return Deliveries(
-        sender=sender, receiver=receiver, range_m=range_m, bearing_rad=np.asarray(bearing_rad)
-    )
+    # 1. Loss, one uniform per candidate in (receiver, sender) order; then the decoding cap: a
+    # receiver with more survivors than the cap keeps the nearest ones, ties by sender index.
+    loss_u = rng.random(sender.shape[0])
+    return Survivors(*kernels.rab_select(
+        sender, receiver, dist_m, rel_x, rel_y, pose[:, 2], loss_u, medium.near_m, medium.range_m,
+        medium.loss_near, medium.loss_far, medium.max_received_per_tick,
+    ))

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from swarmloc.world import kernels
 from swarmloc.world.arena import AREA_NEST, AREA_PREY
 
 # Round-trip stage of each robot.
@@ -67,16 +68,10 @@ class ForagingMetrics:
         if on_path.shape != (self.n_robots,):
             raise ValueError(f"on_path must have shape ({self.n_robots},), got {on_path.shape}")
 
-        in_nest = area == AREA_NEST
-        in_prey = area == AREA_PREY
-        fv = self.first_visit_tick
-        fv[in_nest & (fv[:, 0] < 0), 0] = tick
-        fv[in_prey & (fv[:, 1] < 0), 1] = tick
-
-        arrived = in_nest & (self._stage == _TO_NEST)
-        self.round_trips += arrived
-        self._stage[in_nest] = _TO_PREY
-        self._stage[in_prey & (self._stage == _TO_PREY)] = _TO_NEST
+        kernels.update_round_trips(
+            tick, area.astype(np.int8, copy=False), self.first_visit_tick, self.round_trips,
+            self._stage, AREA_NEST, AREA_PREY, _NO_NEST, _TO_PREY, _TO_NEST,
+        )
 
         if tick % self.sample_every_ticks == 0:
             self._series_tick.append(tick)
