@@ -49,8 +49,10 @@ class JoinError(RuntimeError):
     """The world refused us, or could not be reached."""
 
 
-def join(session: zenoh.Session, keys: Keys, robot_id: int, timeout_s: float) -> Welcome:
-    """Ask the world for our scenario, retrying until ``timeout_s`` (the world may start later)."""
+def join(session: zenoh.Session, keys: Keys, robot_id: int, timeout_s: float,
+         stop: threading.Event | None = None) -> Welcome:
+    """Ask the world for our scenario, retrying until ``timeout_s`` (the world may start later)
+    or until ``stop`` is set (SIGINT/SIGTERM while waiting: JoinError at once)."""
     deadline = time.monotonic() + timeout_s
     request = encode(Join(robot_id=robot_id, brain="auto", pid=os.getpid()))
     while True:
@@ -63,7 +65,10 @@ def join(session: zenoh.Session, keys: Keys, robot_id: int, timeout_s: float) ->
             return msg
         if time.monotonic() > deadline:
             raise JoinError(f"no world answered on {keys.join} within {timeout_s:.0f} s")
-        time.sleep(0.2)  # retry pacing for a world not started yet, not a readiness wait
+        if stop is not None and stop.wait(0.2):  # retry pacing, interrupted by a signal
+            raise JoinError("stopped while waiting for the world")
+        if stop is None:
+            time.sleep(0.2)  # retry pacing for a world not started yet, not a readiness wait
 
 
 class AgentNode:
@@ -155,9 +160,12 @@ def run_agent(
 ) -> int:
     """Run one agent to the end of the run; returns a process exit code."""
     try:
-        welcome = join(session, keys, robot_id, join_timeout_s)
+        welcome = join(session, keys, robot_id, join_timeout_s, stop)
         brain = brain_from_welcome(welcome)
     except (JoinError, BrainError, ProtocolError) as exc:
+        if stop.is_set():
+            log.info("robot %d: stopped before joining", robot_id)
+            return 0
         log.error("robot %d: %s", robot_id, exc)
         return 2
     node = AgentNode(session, keys, robot_id, brain)

@@ -265,7 +265,9 @@ def test_sigterm_to_swarmloc_run_stops_every_piece(tmp_path):
 
 
 def test_restarted_agent_rejoins_its_robot(tmp_path):
-    _, path = _scenario(tmp_path, ["world.robots=3", "world.duration_s=300.0"])
+    # Long enough (8,000 ticks) for a restarted agent to come up, imports and compiled kernels
+    # included, on a loaded machine before the run ends.
+    _, path = _scenario(tmp_path, ["world.robots=3", "world.duration_s=800.0"])
     with supervised() as sup:
         swarm = Swarm(sup, tmp_path, path, robots=3)
         with WorldWatch(swarm.endpoint, swarm.keys) as watch:
