@@ -161,25 +161,37 @@ def robot_rng(seed: int, robot_id: int) -> np.random.Generator:
     return np.random.default_rng([seed, MRCLAM_STREAM, robot_id])
 
 
-def run_replay(dataset: MrclamDataset, config: ReplayConfig) -> ReplayResult:
-    """Replay ``dataset`` through one localizer per robot (see the module docstring)."""
+def replay_world(dataset: MrclamDataset, config: ReplayConfig) -> ReplayWorld:
+    """The replay world of ``config`` (its tick and duration)."""
     end = None
     if config.duration_s is not None:
         end = dataset.time_span_s()[0] + config.duration_s
-    world = ReplayWorld(dataset, config.dt_s, end_s=end)
+    return ReplayWorld(dataset, config.dt_s, end_s=end)
+
+
+def replay_localizer(dataset: MrclamDataset, world: ReplayWorld, config: ReplayConfig, rid: int,
+                     initial_pose: np.ndarray | None = None):
+    """Robot ``rid``'s localizer, built as every runner builds it (in-process or an agent
+    process): its camera calibrated if asked, its known initial pose, its generator."""
+    if initial_pose is None:
+        initial_pose = world.initial_poses()[world.robot_ids.index(rid)]
+    camera = config.camera
+    if config.calibration_s is not None:
+        camera = fit_camera(dataset, rid, world.start_s, world.start_s + config.calibration_s,
+                            camera)
+    setup = LandmarkSetup(robot_id=rid, landmark_ids=dataset.landmarks.ids,
+                          landmark_xy_m=dataset.landmarks.xy_m, initial_pose=initial_pose,
+                          initial_std=config.initial_std, motion=config.motion,
+                          camera=camera, cooperative=config.cooperative)
+    return build_localizer(config.algorithm, setup, robot_rng(config.seed, rid), config.params)
+
+
+def run_replay(dataset: MrclamDataset, config: ReplayConfig) -> ReplayResult:
+    """Replay ``dataset`` through one localizer per robot (see the module docstring)."""
+    world = replay_world(dataset, config)
     initial = world.initial_poses()
-    brains = {}
-    for i, rid in enumerate(world.robot_ids):
-        camera = config.camera
-        if config.calibration_s is not None:
-            camera = fit_camera(dataset, rid, world.start_s, world.start_s + config.calibration_s,
-                                camera)
-        setup = LandmarkSetup(robot_id=rid, landmark_ids=dataset.landmarks.ids,
-                              landmark_xy_m=dataset.landmarks.xy_m, initial_pose=initial[i],
-                              initial_std=config.initial_std, motion=config.motion,
-                              camera=camera, cooperative=config.cooperative)
-        brains[rid] = build_localizer(config.algorithm, setup, robot_rng(config.seed, rid),
-                                      config.params)
+    brains = {rid: replay_localizer(dataset, world, config, rid, initial[i])
+              for i, rid in enumerate(world.robot_ids)}
     n = len(world.robot_ids)
     estimates = np.empty((world.n_ticks, n, 3))
     rejected = 0

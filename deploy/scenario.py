@@ -103,7 +103,7 @@ FAMILY_SCENARIOS: dict[str, str] = {
     "foraging": "swarmloc.deploy.scenario:Scenario",
     "laser": "swarmloc.deploy.laser_batch:LaserScenario",
     "vision": "swarmloc.deploy.vision_batch:VisionScenario",
-    "replay": "swarmloc.deploy.mrclam:ReplayScenario",
+    "replay": "swarmloc.world.replay_service:ReplayScenario",
 }
 
 #: What the common command-line flags set in each family's scenario.
@@ -112,6 +112,7 @@ FLAG_KEYS: dict[str, dict[str, str]] = {
                  "seed": "world.seed", "duration_s": "world.duration_s"},
     "laser": {"robots": "world.robots", "seed": "world.seed", "algorithm": "algorithm.name"},
     "vision": {"seed": "world.seed", "duration_s": "setup.duration_s"},
+    "replay": {"seed": "seed", "duration_s": "duration_s", "algorithm": "algorithm"},
 }
 
 
