@@ -329,7 +329,9 @@ def _send_joins(session, keys: Keys, payloads: list[bytes], in_flight: int = 64)
 
 @pytest.mark.integration
 def test_a_real_run_refuses_and_counts_100k_bad_messages_and_is_unchanged(tmp_path):
-    scenario = load_scenario("ES1", [f"world.robots={ROBOTS}", "world.duration_s=400.0", "world.seed=11"])
+    # Long enough (12,000 ticks) that all the fuzz is in while the run still ticks: with the
+    # compiled kernels a 3-robot world runs several hundred ticks per second.
+    scenario = load_scenario("ES1", [f"world.robots={ROBOTS}", "world.duration_s=1200.0", "world.seed=11"])
     path = tmp_path / "scenario.json"
     path.write_text(json.dumps(scenario.to_dict()))
     expected = json.loads(json.dumps(run_batch(scenario).metrics))
