@@ -24,9 +24,10 @@ from swarmloc.protocol.messages import (
     WorldState,
     encode,
 )
+from swarmloc.world.service import DrivenRobots
 
 
-class LaserService:
+class LaserService(DrivenRobots):
     family = "laser"
     act_type = EstimateAct
 
@@ -49,20 +50,6 @@ class LaserService:
     @property
     def tick(self) -> int:
         return self.world.step_index
-
-    @property
-    def done(self) -> bool:
-        return self.world.done
-
-    @property
-    def alive(self) -> np.ndarray:
-        return self._alive
-
-    def kill(self, robot: int) -> None:
-        self._alive[robot] = False
-
-    def revive(self, robot: int) -> None:
-        self._alive[robot] = True
 
     def senses(self) -> list[tuple[int, bytes]]:
         k = self.world.step_index

@@ -28,6 +28,7 @@ from swarmloc.protocol.messages import (
     WorldState,
     encode,
 )
+from swarmloc.world.service import DrivenRobots
 
 
 @dataclass(frozen=True)
@@ -95,7 +96,7 @@ class _ReplayFacts:
         self.steps = replay_world(dataset, scenario.config()).n_ticks
 
 
-class ReplayService:
+class ReplayService(DrivenRobots):
     family = "replay"
     act_type = EstimateAct
 
@@ -118,20 +119,6 @@ class ReplayService:
     @property
     def tick(self) -> int:
         return self.world.tick
-
-    @property
-    def done(self) -> bool:
-        return self.world.done
-
-    @property
-    def alive(self) -> np.ndarray:
-        return self._alive
-
-    def kill(self, robot: int) -> None:
-        self._alive[robot] = False
-
-    def revive(self, robot: int) -> None:
-        self._alive[robot] = True
 
     def senses(self) -> list[tuple[int, bytes]]:
         out = []

@@ -62,6 +62,28 @@ class ServedWorld(Protocol):
         """The run's metrics so far (plain, JSON-friendly)."""
 
 
+class DrivenRobots:
+    """For worlds that move their robots themselves (laser driver, replay): a robot whose agent
+    is gone keeps its trajectory and just stops getting Senses. Subclasses set ``_alive`` and
+    ``world`` (with ``done``) and define :attr:`tick`."""
+
+    _alive: np.ndarray
+
+    @property
+    def done(self) -> bool:
+        return self.world.done
+
+    @property
+    def alive(self) -> np.ndarray:
+        return self._alive
+
+    def kill(self, robot: int) -> None:
+        self._alive[robot] = False
+
+    def revive(self, robot: int) -> None:
+        self._alive[robot] = True
+
+
 class ForagingService:
     """The e-puck foraging world of seeds 000/001 (:class:`ForagingWorld`) as a served world.
 
