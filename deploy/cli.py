@@ -101,8 +101,9 @@ def _install_stop() -> threading.Event:
 def main_scenarios(args) -> int:
     from swarmloc.deploy.scenario import builtin_names, scenario_data
 
-    for name in builtin_names():
-        print(f"{name:14s} {scenario_data(name).get('description', '')}")
+    for name in builtin_names(None):
+        data = scenario_data(name)
+        print(f"{name:30s} {data.get('family', 'foraging'):9s} {data.get('description', '')}")
     return 0
 
 

@@ -333,3 +333,13 @@ def test_batch_robots_stay_inside_the_arena(es1_runs):
     r = 0.035
     assert (a.final_pose[:, 0] >= r - 1e-9).all() and (a.final_pose[:, 0] <= 1.2 - r + 1e-9).all()
     assert (a.final_pose[:, 1] >= r - 1e-9).all() and (a.final_pose[:, 1] <= 1.7 - r + 1e-9).all()
+
+
+def test_scenarios_command_lists_every_family(capsys):
+    from swarmloc.deploy.cli import main
+
+    assert main(["scenarios"]) == 0
+    rows = [line.split()[:2] for line in capsys.readouterr().out.splitlines()]
+    families = {family for _, family in rows}
+    assert families == {"foraging", "laser", "vision", "replay"}
+    assert ["ES3", "foraging"] in rows and ["vision-exp3", "vision"] in rows
