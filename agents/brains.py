@@ -14,8 +14,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from swarmloc.config import ConfigError, from_dict
-from swarmloc.protocol.epuck import EpuckBody
+from swarmloc.config import ConfigError
 from swarmloc.protocol.errors import ErrorCounter
 from swarmloc.protocol.messages import EpuckAct, EpuckSense, Welcome
 
@@ -48,19 +47,12 @@ class ForagingAgent:
         self._no_mail = Inbox.empty(self._capacity)
 
     @classmethod
-    def from_welcome(cls, welcome: Welcome) -> ForagingAgent:
-        from swarmloc.agents.foraging import AgentConfig, ForagingBrain, agent_rng
+    def from_welcome(cls, welcome: Welcome, scenario) -> ForagingAgent:
+        from swarmloc.agents.foraging import ForagingBrain, agent_rng
 
-        scenario = welcome.scenario
-        try:
-            config = from_dict(AgentConfig, scenario.get("agent", {}), "agent")
-            world = scenario.get("world", {})
-            body = from_dict(EpuckBody, world.get("body", {}), "world.body")
-            tick_s = float(world.get("tick_s", 0.1))
-        except (ConfigError, AttributeError, TypeError, ValueError) as exc:
-            raise BrainError(f"the world's scenario is not usable: {exc}") from None
-        rid = welcome.robot_id
-        return cls(ForagingBrain(config, body, [rid], [agent_rng(welcome.seed, rid)], tick_s), rid)
+        rid, world = welcome.robot_id, scenario.world
+        brain = ForagingBrain(scenario.agent, world.body, [rid], [agent_rng(welcome.seed, rid)], world.tick_s)
+        return cls(brain, rid)
 
     def _inbox(self, sense: EpuckSense, errors: ErrorCounter):
         from swarmloc.agents.foraging import Inbox, SocialMessages
@@ -104,7 +96,8 @@ class ForagingAgent:
         )
 
 
-#: family name -> "module:function" building an AgentBrain from the world's Welcome.
+#: family name -> "module:callable" building an AgentBrain from the world's Welcome and the
+#: family's scenario object parsed from it.
 FAMILIES: dict[str, str] = {
     "foraging": "swarmloc.agents.brains:ForagingAgent.from_welcome",
     "laser": "swarmloc.agents.laser_agent:LaserAgent.from_welcome",
@@ -115,12 +108,14 @@ FAMILIES: dict[str, str] = {
 
 def brain_from_welcome(welcome: Welcome) -> AgentBrain:
     """The brain the world's scenario asks for; BrainError names what is unusable."""
-    family = welcome.scenario.get("family", "foraging")
-    target = FAMILIES.get(family) if isinstance(family, str) else None
-    if target is None:
-        raise BrainError(f"the world's scenario names an unknown robot family {family!r}")
-    module, _, path = target.partition(":")
+    from swarmloc.deploy.scenario import scenario_from_dict
+
+    try:
+        loaded = scenario_from_dict(welcome.scenario)
+    except (ConfigError, TypeError, ValueError) as exc:
+        raise BrainError(f"the world's scenario is not usable: {exc}") from None
+    module, _, path = FAMILIES[loaded.family].partition(":")
     obj: Any = importlib.import_module(module)
     for part in path.split("."):
         obj = getattr(obj, part)
-    return obj(welcome)
+    return obj(welcome, loaded.scenario)

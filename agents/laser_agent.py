@@ -25,22 +25,18 @@ class LaserAgent:
         self.robot_id = robot_id
 
     @classmethod
-    def from_welcome(cls, welcome: Welcome) -> LaserAgent:
+    def from_welcome(cls, welcome: Welcome, scenario) -> LaserAgent:
         from swarmloc.agents.foraging import agent_rng
-        from swarmloc.config import ConfigError
-        from swarmloc.deploy.laser_batch import ALGORITHMS, LaserScenario
+        from swarmloc.deploy.laser_batch import ALGORITHMS
 
-        data = {k: v for k, v in welcome.scenario.items() if k != "family"}
+        config, algo = scenario.world, scenario.algorithm
+        if welcome.robot_id >= config.robots:
+            raise BrainError(f"robot {welcome.robot_id} is not in a world of {config.robots}")
         try:
-            scenario = LaserScenario.from_dict(data)
-            config = scenario.world
-            if welcome.robot_id >= config.robots:
-                raise BrainError(f"robot {welcome.robot_id} is not in a world of {config.robots}")
-            algo = scenario.algorithm
             entry = ALGORITHMS.get(algo.name)
             params = algo.resolved_params()
             entry.check(params)
-        except (ConfigError, ValueError, TypeError) as exc:
+        except (ValueError, TypeError) as exc:
             raise BrainError(f"the world's laser scenario is not usable: {exc}") from None
         setup = LocalizerSetup.from_world_config(config, welcome.robot_id, algo.cooperative)
         localizer = entry.build(setup, dict(params), agent_rng(config.seed, welcome.robot_id))

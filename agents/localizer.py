@@ -29,9 +29,8 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-#: Upper bound on one radio payload (a CFS-GA robot sends its above-average individuals, an
-#: MR-SSGA robot its scan and best pose): 32 KiB is far above what any of them needs.
-MAX_RADIO_PAYLOAD_BYTES = 32 * 1024
+# The bound on one radio payload is the protocol's (every world and wire message enforces it).
+from swarmloc.protocol.messages import MAX_RADIO_PAYLOAD_BYTES  # noqa: F401 -- re-exported
 
 
 @dataclass(frozen=True)

@@ -54,6 +54,7 @@ def join(session: zenoh.Session, keys: Keys, robot_id: int, timeout_s: float,
     """Ask the world for our scenario, retrying until ``timeout_s`` (the world may start later)
     or until ``stop`` is set (SIGINT/SIGTERM while waiting: JoinError at once)."""
     deadline = time.monotonic() + timeout_s
+    stop = stop if stop is not None else threading.Event()
     request = encode(Join(robot_id=robot_id, brain="auto", pid=os.getpid()))
     while True:
         for reply in session.get(keys.join, payload=request, timeout=2.0):
@@ -65,10 +66,8 @@ def join(session: zenoh.Session, keys: Keys, robot_id: int, timeout_s: float,
             return msg
         if time.monotonic() > deadline:
             raise JoinError(f"no world answered on {keys.join} within {timeout_s:.0f} s")
-        if stop is not None and stop.wait(0.2):  # retry pacing, interrupted by a signal
+        if stop.wait(0.2):  # retry pacing for a world not started yet, cut short by a signal
             raise JoinError("stopped while waiting for the world")
-        if stop is None:
-            time.sleep(0.2)  # retry pacing for a world not started yet, not a readiness wait
 
 
 class AgentNode:

@@ -23,14 +23,11 @@ class ReplayAgent:
         self.data_robot_id = data_robot_id
 
     @classmethod
-    def from_welcome(cls, welcome: Welcome) -> ReplayAgent:
+    def from_welcome(cls, welcome: Welcome, scenario) -> ReplayAgent:
         from swarmloc.config import ConfigError
         from swarmloc.deploy.mrclam import replay_localizer, replay_world
-        from swarmloc.world.replay_service import ReplayScenario
 
-        data = {k: v for k, v in welcome.scenario.items() if k != "family"}
         try:
-            scenario = ReplayScenario.from_dict(data)
             dataset = scenario.load()
             config = scenario.config()
             world = replay_world(dataset, config)

@@ -40,17 +40,14 @@ class VisionAgent:
         self._pending: list[tuple[int, int, bytes]] = []  # (tick, sender, payload)
 
     @classmethod
-    def from_welcome(cls, welcome: Welcome) -> VisionAgent:
+    def from_welcome(cls, welcome: Welcome, scenario) -> VisionAgent:
         from swarmloc.agents.vision_agent import VisionBrain
-        from swarmloc.config import ConfigError
-        from swarmloc.deploy.vision_batch import AGENT_STREAM, VisionScenario, world_config
+        from swarmloc.deploy.vision_batch import AGENT_STREAM, world_config
 
-        data = {k: v for k, v in welcome.scenario.items() if k != "family"}
+        seed = scenario.world.seed
         try:
-            scenario = VisionScenario.from_dict(data)
-            seed = scenario.world.seed
             wcfg, lay = world_config(scenario, seed)
-        except (ConfigError, ValueError, TypeError) as exc:
+        except (ValueError, TypeError) as exc:
             raise BrainError(f"the world's vision scenario is not usable: {exc}") from None
         i, n = welcome.robot_id, len(lay.robots)
         if i >= n:

@@ -147,7 +147,7 @@ def main_world(args) -> int:
         os.replace(tmp, out / "results.json")
 
     with open_session(config_from_args(args)) as session:
-        server = WorldServer(session, keys, served_world(scenario.to_dict()), scenario.to_dict(),
+        server = WorldServer(session, keys, served_world(scenario), scenario.to_dict(),
                              realtime=args.realtime, act_timeout_s=args.act_timeout_s,
                              join_timeout_s=args.join_timeout_s,
                              checkpoint=write_results if out else None,

@@ -413,6 +413,13 @@ def _check_estimate(value, robot: int) -> np.ndarray:
     return estimate
 
 
+def pose_errors(estimates: np.ndarray, true_poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Position error ``|xy_est - xy_true|`` and heading error ``|wrap(theta_est - theta_true)|``,
+    each ``(T, N)``, of estimates ``(T, N, 3)`` against true poses ``(T, N, 3)``."""
+    position = np.hypot(estimates[..., 0] - true_poses[..., 0], estimates[..., 1] - true_poses[..., 1])
+    return position, np.abs(wrap_angle(estimates[..., 2] - true_poses[..., 2]))
+
+
 def run_laser(
     scenario: LaserScenario,
     algorithm: str | LocalizerFactory | None = None,
@@ -465,9 +472,7 @@ def run_laser(
             estimates[k, r] = _check_estimate(localizer.estimate(), r)
             outgoing.append(localizer.outgoing())
         world.step(outgoing)
-    position_error = np.hypot(estimates[..., 0] - true_poses[..., 0],
-                              estimates[..., 1] - true_poses[..., 1])
-    heading_error = np.abs(wrap_angle(estimates[..., 2] - true_poses[..., 2]))
+    position_error, heading_error = pose_errors(estimates, true_poses)
     kidnaps = [(k.robot, k.step) for k in config.kidnaps]
     summary = summarize(position_error, heading_error, kidnaps, scenario.metrics, sightings)
     window = min(scenario.metrics.final_window_steps, steps)

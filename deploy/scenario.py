@@ -166,11 +166,23 @@ def family_of(data: dict) -> str:
     return family
 
 
+def scenario_from_dict(data: dict) -> AnyScenario:
+    """A scenario of any family from its plain dict, as a run folder's ``scenario.json``, a
+    world's Welcome or :meth:`AnyScenario.to_dict` carries it; ConfigError names what is wrong."""
+    import importlib
+
+    family = family_of(data)
+    module, _, name = FAMILY_SCENARIOS[family].partition(":")
+    cls = getattr(importlib.import_module(module), name)
+    fields = {k: v for k, v in data.items() if k != "family"}
+    if "family" in getattr(cls, "__dataclass_fields__", {}):
+        fields["family"] = family
+    return AnyScenario(family, cls.from_dict(fields))
+
+
 def load_any(name_or_path: str, flags: dict | None = None, overrides: list[str] = ()) -> AnyScenario:
     """Load a scenario of any family; ``flags`` (e.g. ``{"robots": 3}``) are mapped to that
     family's keys (a flag the family has no use for is an error), then ``overrides`` applied."""
-    import importlib
-
     data = scenario_data(name_or_path)
     family = family_of(data)
     keys = FLAG_KEYS.get(family, {})
@@ -182,8 +194,4 @@ def load_any(name_or_path: str, flags: dict | None = None, overrides: list[str] 
             raise ConfigError(f"--{flag.replace('_', '-')} does not apply to a {family} scenario; use --set")
         extra.append(f"{keys[flag]}={json.dumps(value)}")
     data = apply_overrides({k: v for k, v in data.items() if k != "family"}, extra + list(overrides))
-    module, _, cls = FAMILY_SCENARIOS[family].partition(":")
-    scenario = getattr(importlib.import_module(module), cls).from_dict(
-        {**data, "family": "foraging"} if family == "foraging" else data
-    )
-    return AnyScenario(family, scenario)
+    return scenario_from_dict({**data, "family": family})

@@ -13,7 +13,7 @@ import uuid
 import numpy as np
 import pytest
 
-from swarmloc.agents.vision_agent_shell import VisionAgent
+from swarmloc.agents.brains import brain_from_welcome
 from swarmloc.deploy.launch import supervised
 from swarmloc.deploy.run import start_swarm
 from swarmloc.deploy.scenario import load_any
@@ -63,7 +63,7 @@ def test_vision_agents_over_zenoh_reproduce_the_in_process_run(tmp_path, name, s
 def test_a_frame_that_does_not_decode_is_counted_and_the_previous_command_kept():
     scenario = load_any("vision-exp1", {"seed": 2})
     welcome = Welcome(robot_id=0, run="unit", seed=2, scenario=scenario.to_dict())
-    agent = VisionAgent.from_welcome(welcome)
+    agent = brain_from_welcome(welcome)
     world = VisionWorld(world_config(scenario.scenario, 2)[0])
     errors = ErrorCounter()
     obs = world.observe()[0]

@@ -93,8 +93,7 @@ class LaserService(DrivenRobots):
         )
 
     def summary(self) -> dict:
-        from swarmloc.deploy.laser_batch import summarize
-        from swarmloc.world.laser import wrap_angle
+        from swarmloc.deploy.laser_batch import pose_errors, summarize
 
         k = self.world.step_index
         if k == 0:
@@ -103,17 +102,10 @@ class LaserService(DrivenRobots):
         # A robot that never reported an estimate is "nowhere": an infinite error would break
         # the JSON; the map's far corner is as wrong as any estimate can be.
         est = np.where(np.isnan(est), -1e3, est)
-        position = np.hypot(est[..., 0] - true[..., 0], est[..., 1] - true[..., 1])
-        heading = np.abs(wrap_angle(est[..., 2] - true[..., 2]))
+        position, heading = pose_errors(est, true)
         config = self.scenario.world
         kidnaps = [(kn.robot, kn.step) for kn in config.kidnaps if kn.step < k]
         summary = summarize(position, heading, kidnaps, self.scenario.metrics, self.sightings[:k])
         summary["steps"] = k
         summary["final_position_error_m"] = [round(float(e), 6) for e in position[-1]]
         return summary
-
-
-def served_laser_world(scenario: dict) -> LaserService:
-    from swarmloc.deploy.laser_batch import LaserScenario
-
-    return LaserService(LaserScenario.from_dict({k: v for k, v in scenario.items() if k != "family"}))

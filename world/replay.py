@@ -45,6 +45,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from swarmloc.agents.localizer import RadioMessage
+from swarmloc.protocol.messages import MAX_RADIO_PAYLOAD_BYTES
 from swarmloc.world.mrclam import MrclamDataset, RobotRecord
 
 #: Default tick length, see the module docstring.
@@ -53,16 +55,12 @@ DEFAULT_DT_S = 0.02
 #: Dataset 6's odometry logs: 1.03 s, during which the ground truth shows motion).
 DEFAULT_ODOMETRY_HOLD_S = 1.5
 #: Upper bound on one robot's outgoing payload (a pose, a covariance and a few measurements need
-#: about 200 bytes; a particle filter that shares a sample of particles needs a few KiB).
-MAX_PAYLOAD_BYTES = 32 * 1024
-
-
-@dataclass(frozen=True)
-class Message:
-    """A payload teammate ``sender_id`` broadcast at the previous tick."""
-
-    sender_id: int
-    payload: bytes
+#: about 200 bytes; a particle filter that shares a sample of particles needs a few KiB): the
+#: protocol's radio bound, as for the laser robots.
+MAX_PAYLOAD_BYTES = MAX_RADIO_PAYLOAD_BYTES
+#: A payload teammate ``sender_id`` broadcast at the previous tick: the laser robots' radio
+#: message, one type for every family's radio.
+Message = RadioMessage
 
 
 @dataclass(frozen=True)

@@ -67,6 +67,11 @@ class ReplayScenario:
         return _ReplayFacts(self)
 
     def load(self):
+        """The data set (read once per scenario object; ConfigError if it cannot be read)."""
+        return self._loaded
+
+    @functools.cached_property
+    def _loaded(self):
         from swarmloc.world.mrclam import load_dataset
 
         try:
@@ -166,7 +171,3 @@ class ReplayService(DrivenRobots):
         result = ReplayResult(self.config, self.robot_ids, self.world.tick_end_times_s[:k].copy(),
                               self.estimates[:k], truth, 0.0)
         return {"ticks": k, "robots": {str(rid): s for rid, s in score(result).items()}}
-
-
-def served_replay_world(scenario: dict) -> ReplayService:
-    return ReplayService(ReplayScenario.from_dict({k: v for k, v in scenario.items() if k != "family"}))

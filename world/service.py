@@ -5,8 +5,8 @@ it runs the lockstep clock, the join queryable, liveliness and the Zenoh keys, a
 tick's decoded Acts to a :class:`ServedWorld`. One robot family = one adapter here, a few lines
 around a pure world model; a replay of recorded data is another adapter behind the same shell.
 
-Families are looked up by the scenario's ``family`` key (``"foraging"`` when absent) through
-:func:`served_world`; each family's module is imported only when asked for.
+Families are looked up by the scenario's family (its ``family`` key, ``"foraging"`` when absent)
+through :func:`served_world`; each family's module is imported only when asked for.
 """
 
 from __future__ import annotations
@@ -16,7 +16,6 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from swarmloc.config import ConfigError
 from swarmloc.protocol.epuck import on_path
 from swarmloc.protocol.messages import EpuckAct, EpuckSense, RabMessage, WorldState, encode
 
@@ -171,35 +170,23 @@ class ForagingService:
         return self.world.metrics.summary()
 
 
-def _foraging(scenario: dict) -> ForagingService:
-    from swarmloc.deploy.scenario import Scenario
+def _foraging(scenario) -> ForagingService:
     from swarmloc.world.foraging import ForagingWorld
 
-    return ForagingService(ForagingWorld(Scenario.from_dict(scenario).world))
+    return ForagingService(ForagingWorld(scenario.world))
 
 
-#: family name -> "module:function" building a ServedWorld from a scenario dict. Imported lazily
-#: so that serving e-pucks never imports OpenCV or the laser maps.
+#: family name -> "module:callable" building a ServedWorld from that family's scenario object.
+#: Imported lazily so that serving e-pucks never imports OpenCV or the laser maps.
 FAMILIES: dict[str, str] = {
     "foraging": "swarmloc.world.service:_foraging",
-    "laser": "swarmloc.world.laser_service:served_laser_world",
-    "vision": "swarmloc.world.vision_service:served_vision_world",
-    "replay": "swarmloc.world.replay_service:served_replay_world",
+    "laser": "swarmloc.world.laser_service:LaserService",
+    "vision": "swarmloc.world.vision_service:VisionService",
+    "replay": "swarmloc.world.replay_service:ReplayService",
 }
 
 
-def family_of(scenario: dict) -> str:
-    family = scenario.get("family", "foraging")
-    if family not in FAMILIES:
-        raise ConfigError(f"family: unknown robot family {family!r} (known: {', '.join(FAMILIES)})")
-    return family
-
-
-def _resolve(target: str):
-    module, _, name = target.partition(":")
-    return getattr(importlib.import_module(module), name)
-
-
-def served_world(scenario: dict) -> ServedWorld:
-    """Build the served world of a scenario dict (validated; ConfigError names what is wrong)."""
-    return _resolve(FAMILIES[family_of(scenario)])(scenario)
+def served_world(scenario) -> ServedWorld:
+    """The served world of a loaded scenario of any family (``deploy.scenario.AnyScenario``)."""
+    module, _, name = FAMILIES[scenario.family].partition(":")
+    return getattr(importlib.import_module(module), name)(scenario.scenario)

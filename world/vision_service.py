@@ -128,6 +128,13 @@ class VisionService:
         self.goals[i] = goal if isinstance(goal, str) else None
         self.reached[i] = est.get("reached") is True
 
+    def _note_arrivals(self, time_s: float) -> None:
+        """Record ``time_s`` for every robot now within reach of its goal for the first time."""
+        pose = self.world.pose
+        for i, goal in enumerate(self.layout.goals):
+            if self.reach_time[i] is None and np.hypot(*(pose[i, :2] - self._goal_xy[goal])) <= self._reach_m[i]:
+                self.reach_time[i] = time_s
+
     def step(self, acts: list[VisionAct | None]) -> None:
         from swarmloc.world.vision_world import VisionCommand
 
@@ -140,10 +147,7 @@ class VisionService:
                 self._score(i, act.estimates)
             except (ValueError, TypeError):
                 self.bad_estimates += 1
-        for i in range(self.n_robots):
-            goal = self._goal_xy[self.layout.goals[i]]
-            if self.reach_time[i] is None and np.hypot(*(world.pose[i, :2] - goal)) <= self._reach_m[i]:
-                self.reach_time[i] = round(world.time_s, 3)
+        self._note_arrivals(round(world.time_s, 3))
         world.step(self._commands)
         self._tick += 1
         if all(self.reached):
@@ -152,10 +156,7 @@ class VisionService:
         else:
             self._settled_since = None
         if self.done:
-            for i in range(self.n_robots):  # the last move
-                goal = self._goal_xy[self.layout.goals[i]]
-                if self.reach_time[i] is None and np.hypot(*(world.pose[i, :2] - goal)) <= self._reach_m[i]:
-                    self.reach_time[i] = world.time_s
+            self._note_arrivals(world.time_s)  # the last move
 
     def state(self) -> WorldState:
         poses = self.world.pose
@@ -190,9 +191,3 @@ class VisionService:
             "bad_estimates": self.bad_estimates,
             "sim_s": round(float(self.world.time_s), 2),
         }
-
-
-def served_vision_world(scenario: dict) -> VisionService:
-    from swarmloc.deploy.vision_batch import VisionScenario
-
-    return VisionService(VisionScenario.from_dict(scenario))
