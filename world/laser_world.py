@@ -483,6 +483,7 @@ class LaserWorld:
                         extra: dict | None = None) -> LocalizerSetup:
         """What robot ``robot_id``'s localizer is built from (the world's sensor parameters)."""
         _integer(robot_id, "robot_id", 0, self.n_robots - 1)
+        # The one derivation an agent process uses too, so both build the same localizer.
         return LocalizerSetup.from_world_config(self.config, robot_id, cooperative, extra)
 
     def observe(self) -> list[LaserObservation]:
