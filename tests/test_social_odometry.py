@@ -129,8 +129,10 @@ def test_sgikf_perfect_other_estimate_is_adopted():
     assert p[0] == 0.0
 
 
-_coord = st.floats(-10.0, 10.0, allow_nan=False)
-_p = st.floats(0.0, 50.0, allow_nan=False)
+# No subnormals: with p_i = 5e-324 the hand formula's own p_i * x_j rounds to a multiple of the
+# smallest subnormal (5e-324 * 1.5 == 1e-323), so it, not the filter, is wrong there.
+_coord = st.floats(-10.0, 10.0, allow_nan=False, allow_subnormal=False)
+_p = st.floats(0.0, 50.0, allow_nan=False, allow_subnormal=False)
 
 
 @PROPERTY
