@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from swarmloc.agents.foraging import BrainOutput, ForagingBrain, Inbox, agent_rng, on_path
+from swarmloc.agents.global_imitation import imitate_brain
 from swarmloc.deploy.scenario import Scenario
 from swarmloc.world.foraging import ForagingWorld, Observation
 
@@ -56,9 +57,12 @@ def run_batch(scenario: Scenario) -> BatchResult:
     brain = swarm_brain(scenario)
     ids = brain.robot_ids
     sent: BrainOutput | None = None
+    central = brain.strategy.central  # seed 001's global imitation: the world knows the true poses
     while not world.done:
         obs = world.observe()
         out = brain.step(obs.encoder_steps, obs.ir, obs.ground, inbox_from(obs, sent, ids))
+        if central:
+            imitate_brain(brain, world.pose)
         world.step(out.wheel_speed_steps_s, out.sending, on_path(out.state))
         sent = out
     return BatchResult(world.metrics.summary(), world.pose.copy(), brain.pose.copy(), brain.lost_count)

@@ -42,7 +42,7 @@ def _scenario_args(p: argparse.ArgumentParser, positional: bool = True) -> None:
                             "default ES1 (for `swarmloc run`: ES1 shortened to 600 s)")
     g = p.add_argument_group("scenario overrides")
     g.add_argument("--robots", type=int, help="number of robots")
-    g.add_argument("--strategy", help="NC, SSGIKF, DSGIKF, SSGIFF, DSGIFF, SSIKF or DSIKF")
+    g.add_argument("--strategy", help="NC, SSGIKF, DSGIKF, SSGIFF, DSGIFF, SSIKF, DSIKF or GLOBAL (batch engine only)")
     g.add_argument("--beta", type=float, help="Fermi beta of the SGIFFs")
     g.add_argument("--algorithm", help="laser scenarios: ssga, simple_ga, cfsga or amcl")
     g.add_argument("--seed", type=int, help="run seed")
@@ -66,11 +66,26 @@ def load_from_args(args, any_family: bool = False):
              for flag in ("robots", "strategy", "beta", "seed", "duration_s", "algorithm")}
     loaded = load_any(args.scenario, flags, overrides)
     if any_family:
+        _refuse_central(loaded)
         return loaded
     if loaded.family != "foraging":
         raise ConfigError(f"scenario '{args.scenario}' is a {loaded.family} scenario; "
                           f"this command runs e-puck foraging scenarios")
     return loaded.scenario
+
+
+def _refuse_central(loaded) -> None:
+    """Processes cannot run a strategy whose sharing is done by a central system that knows the
+    true poses (seed 001's global imitation): say so before anything starts."""
+    if loaded.family != "foraging":
+        return
+    from swarmloc.agents.social_odometry import STRATEGIES
+
+    name = loaded.scenario.agent.strategy
+    if STRATEGIES[name].central:
+        raise ConfigError(f"agent.strategy: {name} is shared by a central system that knows every "
+                          f"robot's true pose; only the batch engine has one (swarmloc batch, "
+                          f"swarmloc experiment), not a swarm of processes")
 
 
 def _transport(p: argparse.ArgumentParser) -> None:

@@ -171,8 +171,12 @@ class ForagingService:
 
 
 def _foraging(scenario) -> ForagingService:
+    from swarmloc.agents.social_odometry import STRATEGIES
     from swarmloc.world.foraging import ForagingWorld
 
+    if STRATEGIES[scenario.agent.strategy].central:
+        raise ValueError(f"agent.strategy: {scenario.agent.strategy} needs the batch engine's central "
+                         f"system; a world-server cannot serve it")
     return ForagingService(ForagingWorld(scenario.world))
 
 
