@@ -59,6 +59,25 @@ class ForagingAgent:
 
         if not sense.received:
             return self._no_mail
+        rows = sense.received
+        try:  # the common case: every message decodes, all at once
+            content = SocialMessages.decode([msg.payload for msg in rows], self._capacity)
+        except ValueError:
+            rows, content = self._good_messages(sense, errors)
+            if not rows:
+                return self._no_mail
+        return Inbox(
+            receiver=np.zeros(len(rows), np.int64),
+            sender_id=np.array([m.sender_id for m in rows], np.int64),
+            range_m=np.array([m.range_m for m in rows]),
+            bearing_rad=np.array([m.bearing_rad for m in rows]),
+            content=content,
+        )
+
+    def _good_messages(self, sense: EpuckSense, errors: ErrorCounter):
+        """The messages whose payload decodes, and their content; each bad one is counted."""
+        from swarmloc.agents.foraging import SocialMessages
+
         rows, contents = [], []
         for msg in sense.received:
             try:
@@ -67,16 +86,9 @@ class ForagingAgent:
             except ValueError as exc:
                 errors.record(f"robot {msg.sender_id}", "payload", exc)
         if not rows:
-            return Inbox.empty(self._capacity)
-        content = SocialMessages(
+            return rows, None
+        return rows, SocialMessages(
             *(np.concatenate([getattr(c, f) for c in contents]) for f in SocialMessages.__dataclass_fields__)
-        )
-        return Inbox(
-            receiver=np.zeros(len(rows), np.int64),
-            sender_id=np.array([m.sender_id for m in rows], np.int64),
-            range_m=np.array([m.range_m for m in rows]),
-            bearing_rad=np.array([m.bearing_rad for m in rows]),
-            content=content,
         )
 
     def act(self, sense: EpuckSense, errors: ErrorCounter) -> EpuckAct:
