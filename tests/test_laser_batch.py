@@ -33,7 +33,14 @@ from swarmloc.deploy.laser_batch import (
     symmetric_position_error,
 )
 from swarmloc.deploy.laser_experiment import columns, row, run_job
-from swarmloc.deploy.laser_report import settle_index, wilson_interval, write_report
+from swarmloc.deploy.laser_experiment import settings as laser_settings
+from swarmloc.deploy.laser_report import (
+    curve_tail_indexes,
+    settle_index,
+    table3_indexes,
+    wilson_interval,
+    write_report,
+)
 from swarmloc.world.laser import LaserParams, cast_rays, unicycle_model
 from swarmloc.world.laser_world import (
     DriverConfig,
@@ -492,3 +499,59 @@ def test_job_row_and_report(tmp_path):
     assert "003 fig. 3" in text and "| CFS-GA | 1 |" in text and "| AMCL | 1 |" in text
     assert (tmp_path / "report" / "fig3_kidnap.png").stat().st_size > 0
     assert ALGORITHMS.get("amcl").label == "AMCL"
+
+
+def test_table3_indexes_by_hand():
+    # Over trials of each trial's final team error: min, max, mean.
+    assert table3_indexes([0.3, 0.1, 0.2, 0.6]) == pytest.approx((0.1, 0.6, 0.3))
+    assert all(math.isnan(v) for v in table3_indexes([]))
+    # The other reading: two trials averaged into one curve [1, 1, 0.5, 0.3] (steps 0-3); its
+    # last quarter is step 3 alone, its last half steps 2-3.
+    runs = np.array([[1.0, 1.5, 0.6, 0.2], [1.0, 0.5, 0.4, 0.4]])
+    assert curve_tail_indexes(runs, 0.25) == pytest.approx((0.3, 0.3, 0.3))
+    assert curve_tail_indexes(runs, 0.5) == pytest.approx((0.3, 0.5, 0.4))
+
+
+def test_aliased_rooms_has_no_rotation_so_no_twin_error():
+    assert map_rotations(build_map("aliased_rooms")) == ()
+    truth = np.array([[1.0, 1.0, 0.3]])
+    twin = np.array([[17.0, 9.0, 0.3 + math.pi]])  # the half-turn image: a wrong pose here
+    assert symmetric_position_error(twin, truth, "aliased_rooms")[0] == pytest.approx(
+        math.hypot(16, 8))
+
+
+def test_table3_spec_and_report_section(tmp_path):
+    """The shipped table-3 spec runs the three algorithms on the aliased floor; its report
+    section names the floor and the definition of the indexes, and shows no symmetry column for
+    a floor without symmetry."""
+    shipped = laser_settings(load_spec("laser-table3"))
+    assert {s.strategy for s in shipped} == {"ssga", "simple_ga", "amcl"}
+    assert {s.scenario for s in shipped} == {"laser-table3-aliased-rooms"}
+    spec_path = tmp_path / "laser-table3.toml"
+    spec_path.write_text(textwrap.dedent("""\
+        name = "laser-table3"
+        family = "laser"
+        replications = 1
+        [[group]]
+        name = "g"
+        scenarios = ["laser-table3-aliased-rooms"]
+        [group.grid]
+        "algorithm.name" = ["ssga", "amcl"]
+        [group.set]
+        "algorithm.population" = 20
+        "world.steps" = 8
+    """))
+    spec = load_spec(spec_path)
+    header = columns(spec)
+    results = tmp_path / "results.csv"
+    with results.open("w", newline="") as handle:
+        writer = csv.writer(handle)
+        writer.writerow(header)
+        for job in plan(spec):
+            writer.writerow(["" if v is None else v for v in row(spec, job, run_job(job))])
+    text = write_report([results], tmp_path / "report", command="test").read_text()
+    assert "`aliased_rooms`" in text and "laser-table3-aliased-rooms.toml" in text
+    assert "What the indexes are over" in text
+    assert "up to the symmetry" not in text
+    assert (tmp_path / "report" / "table3_floor.png").stat().st_size > 0
+    assert "| 20 | MR-SSGA | 1 |" in text and "| 20 | AMCL | 1 |" in text

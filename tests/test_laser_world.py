@@ -304,6 +304,55 @@ def test_symmetric_map_is_fully_symmetric():
         assert canon(moved) == canon(seg)
 
 
+def _canonical_walls(segments_m: np.ndarray) -> list:
+    a, b = np.round(segments_m[:, :2], 9) + 0.0, np.round(segments_m[:, 2:], 9) + 0.0
+    return sorted(tuple(sorted([tuple(p), tuple(q)])) for p, q in zip(a, b, strict=True))
+
+
+def test_aliased_rooms_has_five_alike_rooms_by_hand():
+    """002 fig. 8 as we read it: every room of `aliased_rooms` gives the same scan from the same
+    place in it. From (1.5, 1.0) facing +x in the 6 x 4 m south-west room (door at x in
+    [2.5, 3.5] on y = 4, which no beam crosses), by hand: 4.5 east, 3 / sin 45 up-right to y = 4,
+    3 north, 1.5 / cos 45 up-left to x = 0, 1.5 west, 1 / sin 45 down-left and down-right to
+    y = 0, 1 south. The same pose shifted by 6 or 12 m (south rooms) or turned by a half turn
+    about the middle of the corridor in front of a room (north rooms) reads the same."""
+    world = build_map("aliased_rooms")
+    beams = LaserParams.mr_ssga().beam_angles_rad
+    r2 = math.sqrt(2.0)
+    by_hand = np.array([4.5, 3 * r2, 3.0, 1.5 * r2, 1.5, r2, 1.0, r2])
+    south = [(1.5 + dx, 1.0, 0.0) for dx in (0.0, 6.0, 12.0)]
+    # Half turn about (3 + dx, 5): (1.5, 1) -> (4.5 + dx, 9), heading 0 -> pi.
+    north = [(4.5 + dx, 9.0, math.pi) for dx in (0.0, 6.0)]
+    ranges = cast_rays(world, np.array(south + north), beams, 6.0)
+    np.testing.assert_allclose(ranges, np.tile(by_hand, (5, 1)), atol=RANGE_TOL_M)
+    # The sixth place, where symmetric_rooms has its north-east room, is the hall: the same pose
+    # there (north wall 1 m away, the hall open towards the corridor) reads differently.
+    hall = cast_rays(world, np.array([[16.5, 9.0, math.pi]]), beams, 6.0)[0]
+    assert np.max(np.abs(hall - by_hand)) > 1.0
+
+
+def test_aliased_rooms_is_unique_but_symmetric_rooms_is_not():
+    """The half turn about the centre (9, 5) carries symmetric_rooms onto itself, but not
+    aliased_rooms; nor does either mirror through the centre lines."""
+    centre = np.array([9.0, 5.0])
+    turns = {
+        "half turn": lambda p: -p,
+        "mirror x": lambda p: p * [-1.0, 1.0],
+        "mirror y": lambda p: p * [1.0, -1.0],
+    }
+
+    def moved(seg, transform):
+        return np.column_stack(
+            [transform(seg[:, :2] - centre) + centre, transform(seg[:, 2:] - centre) + centre]
+        )
+
+    symmetric = build_map("symmetric_rooms").segments_m
+    assert _canonical_walls(moved(symmetric, turns["half turn"])) == _canonical_walls(symmetric)
+    aliased = build_map("aliased_rooms").segments_m
+    for transform in turns.values():
+        assert _canonical_walls(moved(aliased, transform)) != _canonical_walls(aliased)
+
+
 def test_segment_map_validation():
     with pytest.raises(ValueError, match="zero-length"):
         SegmentMap("bad", np.array([[0, 0, 1, 0], [1, 1, 1, 1]]))
@@ -325,6 +374,7 @@ def test_registry_rejects_duplicates_and_suggests():
     assert set(MAPS.names()) == {
         "office",
         "symmetric_rooms",
+        "aliased_rooms",
         "wall_two_landmarks",
         "symmetric",
         "three_rooms_corridor",

@@ -442,6 +442,48 @@ def test_eq2_through_the_localizer_with_noise_free_world(delivery_delay):
         assert np.allclose(loc.population[0], me[0], atol=1e-12)
 
 
+def test_eq2_with_the_worlds_own_sightings_and_radio():
+    """The world's conventions (its relative observation, its one-step radio delay) and eq. 2's
+    replication agree: in a noise-free laser world, robot 0's individual kept at its true pose
+    scores exactly (1 + 1) * peak at every step at which it holds a teammate's scan and the
+    matching sighting, while both robots drive and turn in the corridor of `aliased_rooms`."""
+    from swarmloc.world.laser import RelativeNoise
+    from swarmloc.world.laser_world import (
+        DriverConfig,
+        LaserWorld,
+        LaserWorldConfig,
+        RadioConfig,
+        RobotPath,
+    )
+
+    config = LaserWorldConfig(
+        map="aliased_rooms", robots=2, steps=40, dt_s=0.5,
+        laser=LaserParams(n_beams=8, max_range_m=6.0, noise_std_m=0.0),
+        motion=MotionNoise(speed_std_mps=0.0, turn_rate_std_rad_s=0.0),
+        relative=RelativeNoise(distance_std_m=0.0, orientation_std_rad=0.0, range_m=8.0),
+        radio=RadioConfig(range_m=8.0, loss_probability=0.0, line_of_sight=True),
+        driver=DriverConfig(mode="waypoints"),
+        paths=(RobotPath(start=(2.0, 5.0, 0.3), waypoints=((5.0, 4.7), (6.0, 5.3))),
+               RobotPath(start=(9.0, 5.3, 2.5), waypoints=((8.0, 4.6), (7.5, 5.2)))),
+    )
+    world = LaserWorld(config, np.random.default_rng(0))
+    loc = SSGALocalizer(world.localizer_setup(0), SSGAParams(population_size=20),
+                        np.random.default_rng(1))
+    loc.population[0] = world.true_poses[0]
+    used = 0
+    while not world.done:
+        obs = world.observe()
+        loc.step(obs[0])
+        truth = world.true_poses[0]
+        assert np.allclose(loc.population[0], truth, atol=1e-9)  # the best always survives
+        expected = (1 + loc.n_collaborators) * loc.fitness_model.peak
+        assert loc.fitness[0] == pytest.approx(expected, rel=1e-6)
+        used += loc.n_collaborators
+        mate_payload = encode_scan_payload(obs[1].step, obs[1].ranges_m, 6.0)
+        world.step([loc.outgoing(), mate_payload])
+    assert used >= config.steps - 2  # the teammate's scan entered eq. 2 at (almost) every step
+
+
 def test_message_without_sighting_falls_back_to_eq1():
     world = build_map("symmetric")
     setup = make_setup(map_name="symmetric", speed_std_mps=0.0, turn_rate_std_rad_s=0.0)

@@ -7,7 +7,11 @@ environments the two laser seeds use:
 - ``office``: an office-like floor with rooms of different sizes on both sides of a corridor
   (seed 003 §V: "a typical indoor, office-like environment", fig. 1).
 - ``symmetric_rooms``: a highly symmetric multi-room floor, three identical rooms on each side of a
-  corridor (seed 002 §6, fig. 8, the environment of table 3).
+  corridor (seed 002 §6, fig. 8); invariant under a half turn, so no sensor can tell a pose from
+  its twin.
+- ``aliased_rooms``: the same floor with the north-east room opened into a hall at the corridor's
+  east end: five identical rooms (perceptual aliasing, 002 §6) but no rigid symmetry, so the floor
+  as a whole is unique (the environment of our table 3, seed 002 §6, fig. 8).
 - ``wall_two_landmarks``: one wall and two landmarks (seed 002 §5.1, figs. 3-4).
 - ``symmetric``: a fully symmetric environment, invariant under the 8 symmetries of the square
   (seed 002 §5.2, figs. 5-6).
@@ -305,6 +309,21 @@ def symmetric_rooms_map() -> SegmentMap:
     return SegmentMap("symmetric_rooms", np.array(segs))
 
 
+def aliased_rooms_map() -> SegmentMap:
+    """Seed 002 fig. 8 / table 3, globally unique: 18 x 10 m, a 2 m corridor at y in [4, 6]; three
+    identical 6 x 4 m rooms on the south side and two on the north side (the same room turned by
+    a half turn), each with a 1 m door centred on the corridor wall; where the third north room
+    would be, the corridor opens into a 6 x 6 m hall (x in [12, 18], y in [4, 10]). Inside a room
+    the five rooms look alike; the hall and the corridor's closed west end do not."""
+    segs = _box(0.0, 0.0, 18.0, 10.0)
+    segs += _wall(0.0, 4.0, 18.0, 4.0, doors=[(3.0, 1.0), (9.0, 1.0), (15.0, 1.0)])
+    segs += _wall(0.0, 6.0, 12.0, 6.0, doors=[(3.0, 1.0), (9.0, 1.0)])
+    for x in (6.0, 12.0):
+        segs += _wall(x, 0.0, x, 4.0)
+        segs += _wall(x, 6.0, x, 10.0)
+    return SegmentMap("aliased_rooms", np.array(segs))
+
+
 def wall_two_landmarks_map() -> SegmentMap:
     """Seed 002 §5.1: one 10 m wall and two square landmarks (0.3 m pillars) in front of it, in
     an open 12 x 8 m area (no enclosure: beams that miss return the maximum range)."""
@@ -370,6 +389,7 @@ def default_registry() -> MapRegistry:
     registry = MapRegistry()
     registry.register("office", office_map)
     registry.register("symmetric_rooms", symmetric_rooms_map)
+    registry.register("aliased_rooms", aliased_rooms_map)
     registry.register("wall_two_landmarks", wall_two_landmarks_map)
     registry.register("symmetric", symmetric_map)
     registry.register("three_rooms_corridor", three_rooms_corridor_map)
