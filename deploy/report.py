@@ -1095,6 +1095,7 @@ _FIGURE_TITLES = {
     "beta_sweep": "Retrieval of the SGIFFs for each β",
     "on_path": "Stability: fraction of robots on the path in the second half of the run",
     "robots_sweep": "Swarm size: time to locate both areas and round trips vs number of robots",
+    "parameter_sweep": "Parameter sweep: round trips and robots on the path vs a swept parameter",
 }
 _FIGURE_PAPER = {
     "recruitment": {"000": "000 fig. 13", "001": "001 fig. 6a"},
@@ -1102,6 +1103,7 @@ _FIGURE_PAPER = {
     "beta_sweep": {"000": "000 fig. 15", "001": "001 fig. 7 (β of local imitation)"},
     "on_path": {"000": "000 fig. 16", "001": "—"},
     "robots_sweep": {"000": "—", "001": "001 fig. 6b, 8"},
+    "parameter_sweep": {"000": "—", "001": "—"},
 }
 _FILL = {"NC": "white", "comm": "0.78", "special": "0.5"}
 
@@ -1340,6 +1342,63 @@ def _sweep_figure(table: _Table, rows: Sequence[dict], scenario: str, path: Path
     return _n_text(ns).replace("per box", "per point")
 
 
+def swept_parameters(table: _Table, rows: Sequence[dict]) -> list[str]:
+    """Grid columns other than strategy, β and robots that take three or more numeric values in
+    ``rows``: each gets a line figure (e.g. ``world.odometry.slip_fraction``)."""
+    out = []
+    for column in table._extra_columns:
+        values = {r.get(column) for r in rows}
+        if len(values) >= 3 and all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                                    for v in values):
+            out.append(column)
+    return out
+
+
+def _parameter_figure(table: _Table, rows: Sequence[dict], column: str, path: Path) -> str:
+    """Median and interquartile band of round trips and of robots on the path vs ``column``, one
+    line per strategy (and β), one row of panels per scenario."""
+    scenarios = _scenarios(rows)
+    fig, axes = _new_figure(len(scenarios), 2, 5.2, 3.6)
+    axes = np.asarray(axes).reshape(len(scenarios), 2)
+    markers = ["o", "s", "^", "D", "v", "P"]
+    short = column.rsplit(".", 1)[-1]
+    ns = []
+    for i, scen in enumerate(scenarios):
+        lines: dict[Variant, list] = defaultdict(list)
+        for r in rows:
+            if r.get("scenario") == scen:
+                v = table.variant(r)
+                lines[Variant(v.strategy, v.beta, tuple(e for e in v.extras if e[0] != column))].append(r)
+        for ax, (metric, scale, ylabel) in zip(axes[i], (
+                ("round_trips_total", 1.0, "round trips (all robots)"),
+                ("on_path_fraction_mean", 100.0, "robots on the path, 2nd half (%)"))):
+            for j, v in enumerate(sorted(lines, key=Variant.sort_key)):
+                per_x: dict[float, list] = defaultdict(list)
+                for r in lines[v]:
+                    per_x[r.get(column)].append(r)
+                keep = [(x, summarize(per_x[x], metric)) for x in sorted(per_x)]
+                keep = [(x, st) for x, st in keep if st.median is not None]
+                if not keep:
+                    continue
+                ns += [st.n for _, st in keep]
+                x = [k for k, _ in keep]
+                color = "black" if not v.communicates else "0.45"
+                ax.fill_between(x, [st.q1 * scale for _, st in keep], [st.q3 * scale for _, st in keep],
+                                color=color, alpha=0.15, linewidth=0)
+                ax.plot(x, [st.median * scale for _, st in keep], color=color,
+                        marker=markers[j % len(markers)], markersize=4.5, linewidth=1.3,
+                        markerfacecolor="white" if v.communicates else "black", label=v.label())
+            ax.set_xlabel(short)
+            ax.set_ylabel(ylabel)
+            ax.grid(color="0.92")
+            ax.legend(fontsize=8, frameon=False)
+            ax.set_title(f"{scen}: {ylabel.split(' (')[0]}", fontsize=9.5)
+    fig.suptitle(f"Median and interquartile band vs {short}\n"
+                 f"({_n_text(ns).replace('per box', 'per point')})", fontsize=10.5)
+    _save(fig, path)
+    return _n_text(ns).replace("per box", "per point")
+
+
 @dataclass(frozen=True)
 class FigureStatus:
     """One figure of the report: drawn (its file, and the papers' panels it lacks) or not (why)."""
@@ -1408,6 +1467,10 @@ def _draw_figures(table: _Table, out_dir: Path) -> list[FigureStatus]:
                                          "001 fig. 6b, 8" if "001" in papers else "—"))
         if not sweep_scenarios:
             status("robots_sweep", None, "not drawn: no group varies the number of robots")
+        for column in swept_parameters(table, comp):
+            name = f"{prefix}_{_slug(column.rsplit('.', 1)[-1])}_sweep.png"
+            n = _parameter_figure(table, comp, column, out_dir / name)
+            statuses.append(FigureStatus("parameter_sweep", exp, name, f"{column}; {n}", "—"))
     return statuses
 
 

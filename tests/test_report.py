@@ -224,3 +224,29 @@ def test_values_a_group_fixes_tell_no_odometry_error_from_local_imitation(tmp_pa
     labels = {table.variant(r).label() for r in table.rows}
     assert {"SSGIFF β=1e-2 [no-odometry-error]", "SSGIFF β=1e-2 [local-imitation]", "NC",
             "SSIKF"} <= labels
+
+
+def test_a_numeric_grid_column_with_three_values_gets_a_line_figure(tmp_path):
+    # The ES2 slip sweep's shape: NC and SSGIKF at slips 0.2, 0.1, 0.05; medians by hand.
+    rows = []
+    for slip, nc_rt, kf_rt in ((0.2, [8, 9, 10], [20, 21, 22]), (0.1, [18, 19, 20], [40, 41, 42]),
+                               (0.05, [28, 29, 30], [60, 61, 62])):
+        for strategy, rts in (("NC", nc_rt), ("SSGIKF", kf_rt)):
+            part = _rows("slip", "ES2", "ES2", strategy, None, 50, 7200.0, rts, [None] * 3,
+                         [0.5] * 3)
+            for r in part:
+                r["world.odometry.slip_fraction"] = slip
+                r["setting"] += f"/slip={slip}"
+            rows += part
+    results = load_results(_write(tmp_path / "slip.csv", rows))
+    table = report._Table(results)
+    assert report.swept_parameters(table, results) == ["world.odometry.slip_fraction"]
+    # two values only: no sweep
+    assert report.swept_parameters(table, [r for r in results
+                                           if r["world.odometry.slip_fraction"] != 0.05]) == []
+    page = build_report(results, tmp_path / "out", title="slip", command="c", seeds_note="s")
+    name = "slip_slip_fraction_sweep.png"
+    assert (tmp_path / "out" / name).read_bytes()[:8] == PNG_SIGNATURE
+    assert f"]({name})" in page.read_text()
+    assert "| ES2/SSGIKF/slip=0.05 | ES2 | SSGIKF slip_fraction=0.05 | 50 | 3 | 61 [60.5-61.5]" in (
+        page.read_text())
