@@ -16,8 +16,10 @@ SSIKF/DSIKF are the SIKF of eq. 18-22, whose ``p`` is the spectral norm of the o
 covariance (eq. 19) instead of the distance travelled: seed 001's "covariance knowledge"
 comparison, where robots know their odometry error model.
 
-GLOBAL is seed 001's global imitation: no messages between robots; each tick every robot takes
-the mean of the whole group's estimates (:mod:`swarmloc.agents.global_imitation`).
+GLOBAL and GLOBAL_RB are seed 001's global imitation, by the two means the paper names: no
+messages over the 15 cm medium; each tick every robot takes the mean of the whole group's
+estimates, carried exactly by a central system (GLOBAL) or by long-range boards with the medium's
+range and bearing noise (GLOBAL_RB) (:mod:`swarmloc.agents.global_imitation`).
 
 The neighbour's estimate arrives in the neighbour's body frame; :func:`transform_received` turns it
 into the receiver's body frame from the range and the two bearings (eq. 27).
@@ -45,10 +47,12 @@ class Strategy:
     #: SGI filters), or "covariance": the spectral norm of the odometry covariance propagated
     #: with eq. 9-11 (eq. 19, the SIKF; seed 001's "covariance knowledge").
     confidence: str = "distance"
-    #: A central system, not the robots' own medium, shares the estimates (seed 001's global
-    #: imitation, :mod:`swarmloc.agents.global_imitation`): it needs every robot's true pose,
-    #: which only the batch engine's world gives it.
-    central: bool = False
+    #: Seed 001's global imitation (:mod:`swarmloc.agents.global_imitation`): every robot takes
+    #: the mean of the whole group's estimates each tick, shared by a central system that knows
+    #: every robot's true pose ("system": exact transfer) or by range-and-bearing boards of
+    #: unlimited range with the medium's noise ("boards"). Only the batch engine's world has the
+    #: true poses either needs. None: the robots' own 15 cm medium.
+    central: str | None = None
 
 
 #: The registry of strategies, by the names the papers use.
@@ -62,7 +66,8 @@ STRATEGIES: dict[str, Strategy] = {
         Strategy("DSGIFF", communicates=True, double=True, gain="fermi"),
         Strategy("SSIKF", communicates=True, double=False, gain="kalman", confidence="covariance"),
         Strategy("DSIKF", communicates=True, double=True, gain="kalman", confidence="covariance"),
-        Strategy("GLOBAL", communicates=False, double=False, gain="none", central=True),
+        Strategy("GLOBAL", communicates=False, double=False, gain="none", central="system"),
+        Strategy("GLOBAL_RB", communicates=False, double=False, gain="none", central="boards"),
     )
 }
 

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from swarmloc.agents.foraging import BrainOutput, ForagingBrain, Inbox, agent_rng, on_path
-from swarmloc.agents.global_imitation import imitate_brain
+from swarmloc.agents.global_imitation import central_rng, imitate_brain
 from swarmloc.deploy.scenario import Scenario
 from swarmloc.world.foraging import ForagingWorld, Observation
 
@@ -57,12 +57,13 @@ def run_batch(scenario: Scenario) -> BatchResult:
     brain = swarm_brain(scenario)
     ids = brain.robot_ids
     sent: BrainOutput | None = None
-    central = brain.strategy.central  # seed 001's global imitation: the world knows the true poses
+    # seed 001's global imitation: a central system that knows the true poses, with its own noise
+    central = central_rng(scenario.world.seed) if brain.strategy.central else None
     while not world.done:
         obs = world.observe()
         out = brain.step(obs.encoder_steps, obs.ir, obs.ground, inbox_from(obs, sent, ids))
-        if central:
-            imitate_brain(brain, world.pose)
+        if central is not None:
+            imitate_brain(brain, world.pose, central, scenario.world.medium)
         world.step(out.wheel_speed_steps_s, out.sending, on_path(out.state))
         sent = out
     return BatchResult(world.metrics.summary(), world.pose.copy(), brain.pose.copy(), brain.lost_count)

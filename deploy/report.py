@@ -972,35 +972,38 @@ class _Claims:
                 self.add("001/recruitment-reduction-30", "", ours, diff)
         arenas = [s for s in _PAPER_SCENARIOS["001"] if s in self.present
                   and any(r.get("scenario") == s for r in t.comparison)]
-        # Local vs global imitation (strategy GLOBAL), where the results have both.
-        if arenas and not any("GLOBAL" in str(r.get("strategy")).upper() for r in t.comparison):
-            self.missing("001/local-beats-global", "", "global imitation (strategy GLOBAL) in any "
-                         "arena: not in these results")
-            arenas_global = []
-        else:
-            arenas_global = arenas
-        for arena in arenas_global:
-            glob = [r for r in t.comparison if r.get("scenario") == arena
-                    and "GLOBAL" in str(r.get("strategy")).upper()]
+        # Local vs global imitation (strategies GLOBAL and GLOBAL_RB, one claim row each).
+        global_strategies = sorted({str(r.get("strategy")) for r in t.comparison
+                                    if "GLOBAL" in str(r.get("strategy")).upper()})
+        if arenas and not global_strategies:
+            self.missing("001/local-beats-global", "", "global imitation (strategy GLOBAL or "
+                         "GLOBAL_RB) in any arena: not in these results")
+        for arena in arenas if global_strategies else []:
             local = t.select(arena, "SSGIFF")
-            if not glob or not local:
-                self.missing("001/local-beats-global", arena,
-                             f"{arena} global imitation (strategy GLOBAL)" if not glob
-                             else f"{arena} SSGIFF")
-                continue
-            sg, sl = self.rt(glob), self.rt(local)
-            r = _ratio(sl.median, sg.median)
-            p = _mann_whitney_p(sl.values, sg.values)
-            ours = (f"local {_fmt(sl.median)} vs global {_fmt(sg.median)} "
-                    f"({_fmt_ratio(r) if r else '–'}, {_fmt_p(p)})")
-            if p is None:
-                diff = ("local higher" if r is not None and r > 1 else "local not higher") + (
-                    "; significance not computed")
-            elif r is not None and r > 1 and p < 0.05:
-                diff = "agrees"
-            else:
-                diff = "differs: local not significantly better"
-            self.add("001/local-beats-global", arena, ours, diff)
+            for gs in global_strategies:
+                where = arena if len(global_strategies) == 1 else f"{arena}/{gs}"
+                glob = [r for r in t.comparison if r.get("scenario") == arena
+                        and r.get("strategy") == gs]
+                if not glob or not local:
+                    self.missing("001/local-beats-global", where,
+                                 f"{arena} global imitation ({gs})" if not glob
+                                 else f"{arena} SSGIFF")
+                    continue
+                sg, sl = self.rt(glob), self.rt(local)
+                r = _ratio(sl.median, sg.median)
+                p = _mann_whitney_p(sl.values, sg.values)
+                ours = (f"local {_fmt(sl.median)} vs {gs} {_fmt(sg.median)} "
+                        f"({_fmt_ratio(r) if r else '–'}, {_fmt_p(p)})")
+                if p is None:
+                    diff = ("local higher" if r is not None and r > 1 else "local not higher") + (
+                        "; significance not computed")
+                elif r is not None and r > 1 and p < 0.05:
+                    diff = "agrees"
+                elif r is not None and r < 1 and p < 0.05:
+                    diff = f"differs: {gs} significantly better"
+                else:
+                    diff = "differs: local not significantly better"
+                self.add("001/local-beats-global", where, ours, diff)
         for arena in arenas:
             self.ceiling(arena)
         for arena in arenas:

@@ -152,10 +152,11 @@ def test_plan_of_seed_000_reproduction():
 
 def test_plan_of_seed_001_reproduction():
     jobs = plan(load_spec("social-odometry-001"))
-    # 4 arenas x (no imitation + no odometry error + covariance knowledge + global imitation
-    # + 4 betas) + 8 swarm sizes x 2 strategies.
-    assert len(jobs) == (4 * 8 + 8 * 2) * 30
+    # 4 arenas x (no imitation + no odometry error + covariance knowledge + global imitation by
+    # a central system and by boards + 4 betas) + 8 swarm sizes x 2 strategies.
+    assert len(jobs) == (4 * 9 + 8 * 2) * 30
     assert sum(j.setting.startswith("global-imitation/") for j in jobs) == 4 * 30
+    assert sum(j.setting.startswith("global-imitation-boards/") for j in jobs) == 4 * 30
 
 
 def test_dry_run_prints_the_plan_and_writes_nothing(tmp_path, capsys):

@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 from swarmloc.agents.global_imitation import (
-    imitate_brain,
     imitate_globally,
     to_arena_frame,
     to_robot_frames,
+    transfer,
 )
 from swarmloc.deploy.batch import run_batch, swarm_brain
 from swarmloc.deploy.cli import main
@@ -76,6 +76,43 @@ def test_frames_round_trip_for_random_poses():
         np.testing.assert_allclose(d_own, d_arena, atol=1e-9)
 
 
+def _random_poses(rng, n):
+    return np.column_stack([rng.uniform(-3, 3, (n, 2)), rng.uniform(-np.pi, np.pi, n)])
+
+
+def test_noise_free_transfer_by_eq27_equals_the_change_of_frames():
+    # eq. 27 over true ranges and bearings vs carrying each estimate through the arena frame
+    rng = np.random.default_rng(11)
+    n = 7
+    believed, true = _random_poses(rng, n), _random_poses(rng, n)
+    goals = rng.uniform(-4, 4, (n, 2, 2))
+    heard = transfer(goals, believed, true)
+    arena = to_arena_frame(goals, believed, true)
+    for j in range(n):
+        np.testing.assert_allclose(heard[:, j], to_robot_frames(arena[j], believed, true), atol=1e-9)
+
+
+def test_board_noise_moves_a_goal_within_the_bound_of_its_range_and_bearing_errors():
+    # A range error dr and bearing errors dgi, dgj move the received goal by at most
+    # |dr| + (r + d) |dgi| + d |dgj| (r: range, d: goal distance from the sender); the noise is
+    # applied (errors are not all zero) and grows with the range between robots.
+    rng = np.random.default_rng(5)
+    rn, bn = 0.025, math.radians(20)
+    believed = np.zeros((2, 3))
+    errors = {}
+    for r in (0.1, 3.0):
+        true = np.array([[0.0, 0.0, 0.3], [r, 0.0, -1.0]])
+        goals = np.zeros((2, 2, 2))
+        goals[1, 0] = (1.0, 0.0)  # 1 m ahead of the sender
+        exact = transfer(goals, believed, true)[0, 1, 0]
+        samples = np.array([transfer(goals, believed, true, rng, rn, bn)[0, 1, 0] for _ in range(2000)])
+        dev = np.linalg.norm(samples - exact, axis=1)
+        assert dev.max() <= rn + (r + 1.0) * bn + 1.0 * bn + 1e-9
+        assert dev.min() < dev.max()
+        errors[r] = dev.mean()
+    assert errors[3.0] > 2 * errors[0.1]
+
+
 def test_in_the_batch_engine_every_robot_holds_the_same_arena_point_each_tick():
     sc = load_scenario("SO-3.0x3.0", ["world.robots=12", "agent.strategy=GLOBAL", "world.duration_s=400.0",
                                       "world.seed=4"])
@@ -87,7 +124,9 @@ def test_in_the_batch_engine_every_robot_holds_the_same_arena_point_each_tick():
     while not world.done:
         obs = world.observe()
         out = brain.step(obs.encoder_steps, obs.ir, obs.ground, inbox_from(obs, sent, brain.robot_ids))
-        imitate_brain(brain, world.pose)
+        # noise-free boards: every robot must end up holding the same arena point
+        imitate_globally(brain.goal_xy, brain.known, brain.goal_p_m, brain.target, brain.searching,
+                         brain.pose, world.pose)
         for goal in range(2):
             if brain.known[:, goal].any():
                 assert brain.known[:, goal].all()
@@ -131,3 +170,28 @@ def test_world_service_refuses_the_central_strategy():
 
     with pytest.raises(ValueError, match="GLOBAL"):
         _foraging(load_scenario("ES1", ["agent.strategy=GLOBAL"]))
+
+
+def test_boards_average_what_each_robot_received_and_the_system_the_exact_mean():
+    # The same state through both means: without noise they agree; with the boards' noise each
+    # robot's estimate is the mean of its received copies (its own exact), not the exact mean.
+    rng = np.random.default_rng(2)
+    n = 6
+    believed, true = _random_poses(rng, n), _random_poses(rng, n)
+    goal_xy = rng.uniform(-4, 4, (n, 2, 2))
+    known = np.zeros((n, 2), bool)
+    known[:4, 0] = True
+
+    def run(noise, seed):
+        g, k, p = goal_xy.copy(), known.copy(), np.ones((n, 2))
+        imitate_globally(g, k, p, np.full(n, -1), np.zeros(n, bool), believed, true,
+                         np.random.default_rng(seed), *noise)
+        return g
+
+    exact = run((0.0, 0.0), 0)
+    heard = transfer(goal_xy, believed, true)
+    np.testing.assert_allclose(exact[:, 0], heard[:, :4, 0].mean(axis=1), atol=1e-9)
+    noisy = run((0.025, math.radians(20)), 7)
+    expected = transfer(goal_xy, believed, true, np.random.default_rng(7), 0.025, math.radians(20))
+    np.testing.assert_allclose(noisy[:, 0], expected[:, :4, 0].mean(axis=1), atol=1e-12)
+    assert np.abs(noisy[:, 0] - exact[:, 0]).max() > 0.01
