@@ -16,10 +16,10 @@ robot last left the area, in metres.
 
 Everything is over a batch of robots, so one agent process runs a batch of one and the batch
 engine the whole swarm. The layers run in compiled kernels (``agents/kernels.py``), the same for
-both; they evaluate the equations of :mod:`.social_odometry` (whose numpy functions remain the
-readable reference, and the tests hold the kernels to them). The only per-robot Python loop is
-over robots that need a random draw this tick (each robot owns its generator, derived from the
-run seed and its id).
+both, in one call per tick; they evaluate the equations of :mod:`.social_odometry` (whose numpy
+functions remain the readable reference, and the tests hold the kernels to them). Each robot owns
+its generator, derived from the run seed and its id; the kernel draws a robot's random walk from
+it, the numbers numpy would give.
 
 Modelling choices the papers leave open are named in :class:`AgentConfig`.
 """
@@ -275,6 +275,8 @@ class BrainOutput:
     messages: SocialMessages  # (N, ...) one row per robot (meaningful where sending)
     state: np.ndarray  # (N,) int state codes
     pose_estimate: np.ndarray  # (N, 3) dead-reckoned pose
+    #: ``protocol.epuck.on_path(state)``, computed with the state codes (None: not computed).
+    on_path: np.ndarray | None = None
 
 
 _kernels_loaded = False
@@ -311,7 +313,9 @@ class ForagingBrain:
         n = self.robot_ids.shape[0]
         if len(rngs) != n:
             raise ValueError("one generator per robot")
-        self.rngs = rngs
+        # A tuple: the kernels draw from these very generators (see _rng_addresses).
+        self.rngs = tuple(rngs)
+        self._rng_address: tuple = (None, None, None)
         self.tick_s = tick_s
         self.n = n
         k = config.heard_capacity
@@ -340,145 +344,140 @@ class ForagingBrain:
         self.tick = 0
         self.partner_ids = np.full((n, config.encounter_memory), -1, np.int64)
         self.partner_until = np.zeros((n, config.encounter_memory), np.int64)
-        self._gap_ticks = round(config.encounter_gap_s / tick_s)
-        self._gain = {"none": kernels.GAIN_NONE, "kalman": kernels.GAIN_KALMAN, "fermi": kernels.GAIN_FERMI}[
-            self.strategy.gain
-        ]
         self._no_cov = np.zeros((n, 2, 3, 3))  # stands in for goal_cov where there is none
-        self._z = np.zeros(1)  # the exponent of a Fermi gain, handed out by the kernel
         self._adopted = np.zeros((n, 2), bool)
         # Goal vectors of the motor and send layers, their angles, robots drawing a new walk.
         self._geometry = np.zeros((2, n, 3))
         self._atan = np.zeros((n, 3))
         self._need = np.zeros(n, np.int64)
         self._n_need = np.zeros(1, np.int64)
-        self._reported: tuple | None = None  # _report()'s answer when _motors computed it
-        self._wander_low = (-math.pi, config.wander_straight_s[0])
-        self._wander_span = (math.pi - -math.pi, config.wander_straight_s[1] - config.wander_straight_s[0])
         self._silent = SocialMessages.empty(n, k)  # what a robot that never sends "sends"
         self._sending = np.full(n, self.strategy.communicates)
         spin_rad_s = 2.0 * config.turn_speed_steps_s * body.metres_per_step / body.wheelbase_m
-        self._spin_rad_per_tick = spin_rad_s * tick_s
+        # Constants of the layers (agents/kernels.py: brain_tick). The random walk's
+        # uniform((-pi, lo), (pi, hi)) as low + (high - low) * random(), how numpy computes it.
+        lo, hi = config.wander_straight_s
+        self._params = np.zeros(kernels.N_BRAIN_PARAMS)
+        for slot, value in (
+            (kernels.A_CRUISE, config.cruise_speed_steps_s), (kernels.A_SPIN, config.turn_speed_steps_s),
+            (kernels.A_STEERING_GAIN, config.steering_gain), (kernels.A_TURN_IN_PLACE, config.turn_in_place_rad),
+            (kernels.A_ARRIVAL_TOLERANCE, config.arrival_tolerance_m),
+            (kernels.A_SEARCH_OVERSHOOT, config.search_overshoot_m),
+            (kernels.A_AVOID_THRESHOLD, config.avoid_threshold), (kernels.A_VMAX, body.max_wheel_speed_steps_s),
+            (kernels.A_TURN_LO, -math.pi), (kernels.A_TURN_SPAN, math.pi - -math.pi),
+            (kernels.A_STRAIGHT_LO, lo), (kernels.A_STRAIGHT_SPAN, hi - lo),
+            (kernels.A_SPIN_PER_TICK, spin_rad_s * tick_s), (kernels.A_TICK, tick_s),
+            (kernels.U_METRES_PER_STEP, body.metres_per_step), (kernels.U_WHEELBASE, body.wheelbase_m),
+            (kernels.U_BLACK_BELOW, GROUND_BLACK_BELOW), (kernels.U_GREY_BELOW, GROUND_GREY_BELOW),
+            (kernels.U_GROUND_AHEAD, _GROUND_AHEAD_M), (kernels.U_BETA, config.beta),
+            (kernels.U_CONFIDENCE_UNIT, config.confidence_unit_m),
+        ):
+            self._params[slot] = float(value)
+        self._settings = np.zeros(kernels.N_SETTINGS, np.int64)
+        gain = {"none": kernels.GAIN_NONE, "kalman": kernels.GAIN_KALMAN, "fermi": kernels.GAIN_FERMI}
+        for slot, value in (
+            (kernels.S_DO_ODOMETRY, not uses_cov), (kernels.S_USE_COV, uses_cov),
+            (kernels.S_COMMUNICATES, self.strategy.communicates), (kernels.S_DOUBLE, self.strategy.double),
+            (kernels.S_GAIN, gain[self.strategy.gain]), (kernels.S_GAP_TICKS, round(config.encounter_gap_s / tick_s)),
+            (kernels.S_KNOWS_BOTH, KNOWS_BOTH), (kernels.S_MOTORS, 1),
+        ):
+            self._settings[slot] = int(value)
+        self._math = kernels.numpy_math()  # numpy's exp and arctan2, bit for bit
 
     # -- layers ------------------------------------------------------------------------------
-    # The work is done by the compiled kernels of agents/kernels.py, on the state arrays below.
+    # The work is done by the compiled kernels of agents/kernels.py, on the state arrays above,
+    # in one call per tick (brain_tick), for a batch of one as for the whole swarm.
+    #
+    # *Odometry*: dead reckoning of the encoder counts (seed 000 eq. 7); ``p`` grows with the
+    # distance travelled (eq. 23), or is the spectral norm of the odometry covariance propagated
+    # with eq. 9-11 (eq. 19, SIKF strategies: that part is numpy, here, before the kernel).
+    #
+    # *Arrive*: store goal locations seen by the ground sensors; switch target on arrival. The
+    # stored location is the mean, over the visit, of where the robot believes its ground sensor
+    # was while it saw the area: a point inside the area, not the body centre beside it.
+    #
+    # *Receive*: fuse what neighbours sent (seed 000 eq. 14-16, 27). Eq. 27 needs the range and
+    # both bearings of one crossing. A message sent at tick k-1 carries the sender's goals in its
+    # body frame of tick k-2 and the bearing at which it heard us at tick k-2; we heard the sender
+    # at that same crossing, so our own range and bearing from last tick's table, and our pose of
+    # then, complete the transform with no timing error. One exchange per encounter: a recent
+    # partner still in hearing is ignored.
+    #
+    # *Remember heard*: keep the nearest neighbours heard this tick, their ids, range and bearing
+    # (measured at the previous tick's poses, when the messages crossed).
+    #
+    # *Forage* (steer to the target's estimate), *wander* (random walk: robots that start a new
+    # segment draw a turn and a straight run from their own generator), *avoid* (seed 000 §5).
+    #
+    # *Send*: goals are sent in the body frame of the previous tick, the frame the heard bearings
+    # were measured in: the receiver then combines measurements of one and the same crossing.
 
-    def _update(self, encoder_steps: np.ndarray, ground: np.ndarray, inbox: Inbox) -> None:
-        """Odometry, arrive, lost, receive and remember-heard layers (see :mod:`.kernels`).
+    #: The motor layers' stand-in: ``None`` runs forage, wander and avoid (in the compiled tick);
+    #: a function ``f(ir) -> (N, 2) wheel speeds`` set on an instance drives the wheels instead
+    #: (tests use it to steer robots along known paths), every other layer running as usual.
+    _motors = None
 
-        *Odometry*: dead reckoning of the encoder counts (seed 000 eq. 7); ``p`` grows with the
-        distance travelled (eq. 23), or is the spectral norm of the odometry covariance
-        propagated with eq. 9-11 (eq. 19, SIKF strategies).
+    def _rng_addresses(self) -> tuple[np.ndarray, np.ndarray]:
+        """Where the kernels draw each robot's numbers from (agents/kernels.py:
+        generator_address): the addresses of ``self.rngs``, found again if it was replaced."""
+        rngs, fn, state = self._rng_address
+        if rngs is not self.rngs:
+            addresses = [kernels.generator_address(g) for g in self.rngs]
+            fn = np.array([a[0] for a in addresses], np.int64)
+            state = np.array([a[1] for a in addresses], np.int64)
+            self._rng_address = (self.rngs, fn, state)
+        return fn, state
 
-        *Arrive*: store goal locations seen by the ground sensors; switch target on arrival. The
-        stored location is the mean, over the visit, of where the robot believes its ground
-        sensor was while it saw the area: a point inside the area, not the body centre beside it.
+    # The pieces of a call of agents/kernels.py: brain_tick, in its argument order: also for the
+    # batch engine's compiled tick (deploy/batch.py), which calls brain_tick from there.
 
-        *Receive*: fuse what neighbours sent (seed 000 eq. 14-16, 27). Eq. 27 needs the range
-        and both bearings of one crossing. A message sent at tick k-1 carries the sender's goals
-        in its body frame of tick k-2 and the bearing at which it heard us at tick k-2; we heard
-        the sender at that same crossing, so our own range and bearing from last tick's table,
-        and our pose of then, complete the transform with no timing error. One exchange per
-        encounter: a recent partner still in hearing is ignored.
-
-        *Remember heard*: keep the nearest neighbours heard this tick, their ids, range and
-        bearing (measured at the previous tick's poses, when the messages crossed).
-        """
-        encoder_steps = np.asarray(encoder_steps, float)
-        previous = self.pose
-        self.pose_history = (self.pose_history[1], previous)
-        self.pose = np.empty_like(previous)
-        in_kernel = self.goal_cov is None
-        if not in_kernel:
-            kernels.odometry(
-                previous, encoder_steps, self.body.metres_per_step, self.body.wheelbase_m,
-                self.search_left_m, self.goal_p_m, False, self.pose,
-            )
-            # eq. 9-11 for each goal's covariance since the robot left it, then eq. 19.
-            du = encoder_steps * self.body.metres_per_step
-            k = self.config.odometry_k_m
-            cov = propagate_covariance(
-                self.goal_cov.reshape(-1, 3, 3), np.repeat(previous, 2, axis=0),
-                np.repeat(du[:, 0], 2), np.repeat(du[:, 1], 2), self.body.wheelbase_m, k, k,
-            )
-            self.goal_cov = cov.reshape(self.n, 2, 3, 3)
-            self.goal_p_m = _spectral_norm_xy(self.goal_cov)
-        c = inbox.content
-        cov = self.goal_cov if self.goal_cov is not None else self._no_cov
-        strategy, body, cfg = self.strategy, self.body, self.config
-        adopted = self._adopted
-        resume, exp_z = kernels.DONE, 0.0
-        while True:
-            resume = kernels.brain_update(
-                in_kernel, encoder_steps, previous, body.metres_per_step, body.wheelbase_m,
-                self.pose, self.pose_history[0], self.robot_ids, self.known, self.goal_xy,
-                self.goal_p_m, cov, not in_kernel, self.target, self.searching,
-                self.search_left_m, self.lost_count, self.visit_ticks, self.turn_ticks,
-                self.straight_ticks, self.heard_ids, self.heard_bearing_rad, self.heard_range_m,
-                self.partner_ids, self.partner_until, adopted,
-                np.asarray(ground, float), GROUND_BLACK_BELOW, GROUND_GREY_BELOW, _GROUND_AHEAD_M,
-                self.tick,
-                inbox.receiver, inbox.sender_id, inbox.range_m, inbox.bearing_rad, inbox.rows(),
-                c.goal_known, c.goal_distance_m, c.goal_angle_rad, c.goal_p_m, c.heard_ids,
-                c.heard_bearing_rad,
-                strategy.communicates, strategy.double, self._gain, float(cfg.beta),
-                cfg.confidence_unit_m, self._gap_ticks, resume, exp_z, self._z,
-                self._geometry, self._need, self._n_need,
-            )
-            if resume == kernels.DONE:
-                break
-            exp_z = float(np.exp(self._z)[0])  # the Fermi gain's exp, numpy's (eq. 24)
-        self._heard_clear = not inbox.receiver.shape[0]
-        # Angles of the goal vectors, numpy's arctan2 (see agents/kernels.py).
-        self._atan = np.arctan2(self._geometry[1], self._geometry[0])
-
-    def _wander_draws(self, need: np.ndarray) -> None:
-        """Start a new random-walk segment for robots in ``need``: a turn, then a straight run.
-
-        ``uniform((-pi, lo), (pi, hi))`` of each robot's own generator, written as ``low +
-        (high - low) * random()``, which is how numpy computes it (same numbers, less overhead).
-        """
-        low, span = self._wander_low, self._wander_span
-        for i in need.tolist():
-            u = self.rngs[i].random(2)
-            angle = low[0] + span[0] * u[0]
-            straight_s = low[1] + span[1] * u[1]
-            self.turn_ticks[i] = round(abs(angle) / self._spin_rad_per_tick)
-            self.turn_dir[i] = 1.0 if angle >= 0 else -1.0
-            self.straight_ticks[i] = round(straight_s / self.tick_s)
-
-    def _motors(self, ir: np.ndarray) -> np.ndarray:
-        """Forage (steer to the target's estimate), wander (random walk), avoid (seed 000 §5)."""
-        cfg = self.config
-        n_need = int(self._n_need[0])
-        if n_need:
-            self._wander_draws(self._need[:n_need])
-        # The send layer needs the same angles: its report (see _report) comes in the same call.
-        communicates = self.strategy.communicates
-        cmd, *fields, state, pose = kernels.act(
-            self.pose, self.target, self.searching, self.search_left_m, self.turn_ticks,
-            self.straight_ticks, self.turn_dir, self._geometry, self._atan,
-            np.asarray(ir, float), _COS_IR, _SIN_IR, cfg.cruise_speed_steps_s,
-            cfg.turn_speed_steps_s, cfg.steering_gain, cfg.turn_in_place_rad,
-            cfg.arrival_tolerance_m, cfg.search_overshoot_m, cfg.avoid_threshold,
-            self.body.max_wheel_speed_steps_s, self.pose_history[1], self.known, self.goal_p_m,
-            self.heard_ids, self.heard_bearing_rad, communicates, KNOWS_BOTH,
+    def _tick_state(self, new_pose: np.ndarray) -> tuple:
+        """The state arguments of this tick: the pose before, ``new_pose`` (written), the pose of
+        two ticks ago (the frame of the messages heard now), then the state arrays."""
+        return (
+            self.pose, new_pose, self.pose_history[1], self.robot_ids, self.known, self.goal_xy,
+            self.goal_p_m, self.goal_cov if self.goal_cov is not None else self._no_cov, self.target,
+            self.searching, self.search_left_m, self.lost_count, self.visit_ticks, self.turn_ticks,
+            self.straight_ticks, self.turn_dir, self.heard_ids, self.heard_bearing_rad, self.heard_range_m,
+            self.partner_ids, self.partner_until, self._adopted,
         )
-        self._reported = (SocialMessages(*fields) if communicates else self._silent), state, pose
-        return cmd
 
-    def _report(self) -> tuple[SocialMessages, np.ndarray, np.ndarray]:
-        """The messages the robots send, their state codes and dead-reckoned poses.
+    def _tick_constants(self) -> tuple:
+        """The constants, generators and scratch arguments."""
+        fn, rng_state = self._rng_addresses()
+        return (self._params, self._settings, self._math, fn, rng_state, _COS_IR, _SIN_IR,
+                self._geometry, self._atan, self._need, self._n_need)
 
-        Goals are sent in the body frame of the previous tick, the frame the heard bearings were
-        measured in: the receiver then combines measurements of one and the same crossing.
-        """
-        communicates = self.strategy.communicates
-        *fields, state, pose = kernels.report(
-            self.pose_history[1], self._geometry, self._atan, self.known, self.goal_p_m,
-            self.heard_ids, self.heard_bearing_rad, communicates, self.target, KNOWS_BOTH, self.pose,
+    def _outputs(self) -> tuple:
+        """Fresh arrays for the answer: wheel speeds, the 6 message fields (no rows if the
+        strategy does not communicate), state codes, pose estimates, on_path."""
+        n, k = self.n, self.config.heard_capacity
+        rows = n if self.strategy.communicates else 0
+        return (np.empty((n, 2)), np.empty((rows, 2), bool), np.empty((rows, 2)), np.empty((rows, 2)),
+                np.empty((rows, 2)), np.empty((rows, k), np.int64), np.empty((rows, k)), np.empty(n, np.int64),
+                np.empty((n, 3)), np.empty(n, bool))
+
+    def _commit_tick(self, new_pose: np.ndarray) -> None:
+        """After the kernel: the tick is done, ``new_pose`` the pose."""
+        self.tick += 1
+        self.pose_history = (self.pose_history[1], self.pose)
+        self.pose = new_pose
+
+    def _covariance_odometry(self, encoder_steps: np.ndarray, previous: np.ndarray, pose: np.ndarray) -> None:
+        """Odometry of the SIKF strategies: the pose (into ``pose``), then eq. 9-11 for each
+        goal's covariance since the robot left it, then eq. 19."""
+        kernels.odometry(
+            previous, encoder_steps, self.body.metres_per_step, self.body.wheelbase_m,
+            self.search_left_m, self.goal_p_m, False, pose,
         )
-        return (SocialMessages(*fields) if communicates else self._silent), state, pose
+        du = encoder_steps * self.body.metres_per_step
+        k = self.config.odometry_k_m
+        cov = propagate_covariance(
+            self.goal_cov.reshape(-1, 3, 3), np.repeat(previous, 2, axis=0),
+            np.repeat(du[:, 0], 2), np.repeat(du[:, 1], 2), self.body.wheelbase_m, k, k,
+        )
+        self.goal_cov = cov.reshape(self.n, 2, 3, 3)
+        self.goal_p_m = _spectral_norm_xy(self.goal_cov)
 
     def state_codes(self) -> np.ndarray:
         return kernels.state_codes(self.target, self.known, KNOWS_BOTH)
@@ -488,16 +487,26 @@ class ForagingBrain:
     def step(
         self, encoder_steps: np.ndarray, ir: np.ndarray, ground: np.ndarray, inbox: Inbox
     ) -> BrainOutput:
-        """One controller tick for every robot of the batch (10 Hz on the e-puck)."""
-        self.tick += 1
-        self._reported = None
-        self._update(encoder_steps, ground, inbox)
-        cmd = self._motors(ir)
-        messages, state, pose_estimate = self._reported or self._report()
-        return BrainOutput(
-            wheel_speed_steps_s=cmd,
-            sending=self._sending,
-            messages=messages,
-            state=state,
-            pose_estimate=pose_estimate,
+        """One controller tick for every robot of the batch (10 Hz on the e-puck): the layers of
+        the module docstring, in one compiled call (agents/kernels.py: brain_tick)."""
+        encoder_steps = np.asarray(encoder_steps, float)
+        new_pose = np.empty_like(self.pose)
+        if self.goal_cov is not None:
+            self._covariance_odometry(encoder_steps, self.pose, new_pose)
+        cmd, *fields, state, pose, on_path_ = outputs = self._outputs()
+        c = inbox.content
+        motors = self._motors
+        self._settings[kernels.S_MOTORS] = motors is None
+        kernels.brain_tick(
+            encoder_steps, np.asarray(ir, float), np.asarray(ground, float), self.tick + 1,
+            *self._tick_state(new_pose),
+            inbox.receiver, inbox.sender_id, inbox.range_m, inbox.bearing_rad, inbox.rows(),
+            c.goal_known, c.goal_distance_m, c.goal_angle_rad, c.goal_p_m, c.heard_ids, c.heard_bearing_rad,
+            *self._tick_constants(), *outputs,
         )
+        self._commit_tick(new_pose)
+        self._heard_clear = not inbox.receiver.shape[0]
+        if motors is not None:
+            cmd = np.asarray(motors(ir), float)
+        messages = SocialMessages(*fields) if self.strategy.communicates else self._silent
+        return BrainOutput(cmd, self._sending, messages, state, pose, on_path_)

@@ -10,22 +10,37 @@ runs are bit-identical to it (``benchmarks/fingerprint.py``):
 - :func:`brain_update`: ground classification, goal storing on arrival, the lost rule,
   social odometry fusion of what neighbours sent (eq. 14-16, 20-22, 24-27) and the table of
   neighbours heard;
-- :func:`goal_vectors`, :func:`motor_commands`: the forage / wander / avoid layers (§5);
-- :func:`report`, :func:`state_codes`: what a robot sends and reports; :func:`act` runs
-  :func:`motor_commands` and :func:`report` in one call.
+- :func:`goal_vectors`, :func:`wander_draws`, :func:`motor_commands`: the forage / wander /
+  avoid layers (§5);
+- :func:`report_into`, :func:`state_codes`: what a robot sends and reports;
+- :func:`brain_tick`: all of that for one tick in one call (:func:`act_tick`: the part after
+  the goal vectors' angles). numba checks the type of every argument of every call and boxes
+  every array it returns, which for a swarm of 100 costs as much as the work: so the brain
+  makes one call per tick, with preallocated outputs and its constants packed in two arrays.
 
-As in ``world/kernels.py``, random draws (each robot's own generator), ``arctan2`` and ``exp``
-stay in numpy (numpy's SIMD versions of those two differ from the C library in the last bit):
-:func:`brain_update` stops at a Fermi fusion, returns the exponent it needs, and is
-called again with ``exp`` of it.
+Exactness, as in ``world/kernels.py``:
+
+- each robot's random walk draws from its own ``numpy.random.Generator``, through the
+  ``next_double`` function of its bit generator (:func:`generator_address`): the very function
+  ``Generator.random`` calls, so the numbers and the generator's state are numpy's;
+- ``arctan2`` and ``exp``: numpy evaluates them with its own SIMD routines on this hardware, which
+  differ from the C library's in the last bit; :func:`np_arctan2` and :func:`np_exp` call those
+  very routines (:func:`numpy_math` finds them and checks them against numpy once per process),
+  else the C library's if it agrees with numpy here, else numpy itself from the kernel;
+  ``sin``, ``cos``, ``hypot`` and ``sqrt`` agree bit for bit and are used as they are.
 """
 
 from __future__ import annotations
 
+import ctypes
+import functools
+import importlib
 import math
 
 import numpy as np
-from numba import njit
+from llvmlite import ir as llvm_ir
+from numba import njit, objmode, types
+from numba.extending import intrinsic
 
 _PI = math.pi
 _TWO_PI = 2.0 * math.pi
@@ -34,13 +49,225 @@ _TWO_PI = 2.0 * math.pi
 NEST, PREY, NONE = 0, 1, -1
 #: Gains of :func:`brain_update`.
 GAIN_NONE, GAIN_KALMAN, GAIN_FERMI = 0, 1, 2
-#: :func:`brain_update` finished the tick (else it returns ``2 * message + goal``).
-DONE = -1
+
+
+# ------------------------------------------------------------------- numpy's numbers, in kernels
+# The world's and the agents' kernels each carry this block (world/kernels.py, agents/kernels.py):
+# the two share no code but the protocol. tests/test_batch_kernels.py holds both to numpy.
+
+#: How kernels get numpy's float64 ``exp`` and ``arctan2`` bit for bit (:func:`numpy_math`):
+#: numpy's own SIMD routines (SVML, on x86-64 with AVX-512), the C library's, or numpy itself.
+MATH_SVML, MATH_LIBM, MATH_NUMPY = 0, 1, 2
+#: Slots of the ``math_fns`` array of :func:`numpy_math`: the mode, then the SVML entry points.
+M_MODE, M_EXP, M_ATAN2 = 0, 1, 2
+
+
+def generator_address(rng: np.random.Generator) -> tuple[int, int]:
+    """``(next_double, state)`` addresses of a generator's bit generator, for kernels that draw
+    from it: the function ``Generator.random`` calls for each number, so they draw the same
+    stream and advance the generator as numpy would (numba's own ``Generator`` support does the
+    same but unboxes the generator for some 7 us per call). Valid while ``rng`` lives; not for
+    use from two threads at once (numpy's own calls take the bit generator's lock; kernels do
+    not)."""
+    if not isinstance(rng, np.random.Generator):
+        raise TypeError(f"rng: expected a numpy.random.Generator, got {type(rng).__name__}")
+    c = rng.bit_generator.ctypes
+    return ctypes.cast(c.next_double, ctypes.c_void_p).value, int(c.state_address)
+
+
+@intrinsic
+def _call_next_double(typingctx, fn_address, state_address):
+    """``next_double(state)`` of a numpy bit generator (addresses of :func:`generator_address`)."""
+    sig = types.float64(types.intp, types.intp)
+
+    def codegen(context, builder, signature, args):
+        byte_ptr = llvm_ir.IntType(8).as_pointer()
+        fn = builder.inttoptr(args[0], llvm_ir.FunctionType(llvm_ir.DoubleType(), [byte_ptr]).as_pointer())
+        return builder.call(fn, [builder.inttoptr(args[1], byte_ptr)])
+
+    return sig, codegen
+
+
+_F64X8 = llvm_ir.VectorType(llvm_ir.DoubleType(), 8)
+
+
+@intrinsic
+def _svml_exp_lane0(typingctx, fn_address, x):
+    """numpy's SVML ``exp`` (one ``__m512d`` in, one out) of ``x`` in lane 0, zeros elsewhere:
+    how numpy evaluates a lone element."""
+    sig = types.float64(types.intp, types.float64)
+
+    def codegen(context, builder, signature, args):
+        fn = builder.inttoptr(args[0], llvm_ir.FunctionType(_F64X8, [_F64X8]).as_pointer())
+        lane0 = llvm_ir.Constant(llvm_ir.IntType(32), 0)
+        v = builder.insert_element(llvm_ir.Constant(_F64X8, [0.0] * 8), args[1], lane0)
+        return builder.extract_element(builder.call(fn, [v]), lane0)
+
+    return sig, codegen
+
+
+@intrinsic
+def _svml_atan2_x8(typingctx, fn_address, y_address, x_address, out_address):
+    """numpy's SVML ``atan2`` of 8 consecutive float64 at ``y_address``, ``x_address``, to
+    ``out_address``."""
+    sig = types.void(types.intp, types.intp, types.intp, types.intp)
+
+    def codegen(context, builder, signature, args):
+        fn = builder.inttoptr(args[0], llvm_ir.FunctionType(_F64X8, [_F64X8, _F64X8]).as_pointer())
+        ptr = _F64X8.as_pointer()
+        y = builder.load(builder.inttoptr(args[1], ptr), align=8)
+        x = builder.load(builder.inttoptr(args[2], ptr), align=8)
+        builder.store(builder.call(fn, [y, x]), builder.inttoptr(args[3], ptr), align=8)
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
+@njit(cache=True, error_model="numpy")
+def np_exp(x, math_fns):
+    """numpy's ``exp`` of one float64, bit for bit (``math_fns`` of :func:`numpy_math`)."""
+    mode = math_fns[M_MODE]
+    if mode == MATH_SVML:
+        return _svml_exp_lane0(math_fns[M_EXP], x)
+    if mode == MATH_LIBM:
+        return math.exp(x)
+    with objmode(out="float64"):
+        out = float(np.exp(np.array([x]))[0])
+    return out
+
+
+@njit(cache=True, error_model="numpy")
+def np_arctan2(y, x, out, math_fns):
+    """``out[:] = numpy.arctan2(y, x)`` bit for bit, for 1-D float64 arrays of one length (numpy's
+    SIMD loop runs 8 lanes at a time and pads the last vector with zeros: so does this)."""
+    n = y.shape[0]
+    mode = math_fns[M_MODE]
+    if mode == MATH_SVML:
+        if y.strides[0] == 8 and x.strides[0] == 8 and out.strides[0] == 8:
+            _svml_atan2_run(math_fns[M_ATAN2], y.ctypes.data, x.ctypes.data, out.ctypes.data, n)
+        else:
+            yc, xc, oc = np.ascontiguousarray(y), np.ascontiguousarray(x), np.empty(n)
+            _svml_atan2_run(math_fns[M_ATAN2], yc.ctypes.data, xc.ctypes.data, oc.ctypes.data, n)
+            out[:] = oc
+    elif mode == MATH_LIBM:
+        for q in range(n):
+            out[q] = math.atan2(y[q], x[q])
+    else:
+        with objmode():
+            np.arctan2(y, x, out=out)
+
+
+@njit(cache=True, error_model="numpy")
+def _svml_atan2_run(fn, y_address, x_address, out_address, n):
+    """SVML ``atan2`` of ``n`` contiguous float64, 8 at a time, the last vector zero-padded."""
+    q = 0
+    while q + 8 <= n:
+        _svml_atan2_x8(fn, y_address + 8 * q, x_address + 8 * q, out_address + 8 * q)
+        q += 8
+    if q < n:
+        tail = np.zeros(24)
+        t = tail.ctypes.data
+        for k in range(n - q):
+            tail[k] = _load_f64(y_address + 8 * (q + k))
+            tail[8 + k] = _load_f64(x_address + 8 * (q + k))
+        _svml_atan2_x8(fn, t, t + 64, t + 128)
+        for k in range(n - q):
+            _store_f64(out_address + 8 * (q + k), tail[16 + k])
+
+
+@intrinsic
+def _load_f64(typingctx, address):
+    sig = types.float64(types.intp)
+
+    def codegen(context, builder, signature, args):
+        return builder.load(builder.inttoptr(args[0], llvm_ir.DoubleType().as_pointer()), align=8)
+
+    return sig, codegen
+
+
+@intrinsic
+def _store_f64(typingctx, address, value):
+    sig = types.void(types.intp, types.float64)
+
+    def codegen(context, builder, signature, args):
+        builder.store(args[1], builder.inttoptr(args[0], llvm_ir.DoubleType().as_pointer()), align=8)
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
+@njit(cache=True, error_model="numpy")
+def _probe_math(x, y, z, math_fns):
+    e = np.empty_like(x)
+    for q in range(x.shape[0]):
+        e[q] = np_exp(x[q], math_fns)
+    a = np.empty_like(y)
+    np_arctan2(y, z, a, math_fns)
+    return e, a
+
+
+def _svml_entry_points() -> tuple[int, int] | None:
+    """numpy's SVML ``exp`` and ``atan2`` (``__m512d`` in zmm registers), if numpy has them and
+    both numpy and numba's code generator may use AVX-512 here."""
+    try:
+        import llvmlite.binding as llvm
+        from numba.core import config
+
+        umath = importlib.import_module("numpy._core._multiarray_umath")
+        if not umath.__cpu_features__.get("AVX512_SKX"):
+            return None
+        if config.CPU_NAME not in (None, "host") or config.CPU_FEATURES is not None:
+            return None
+        if not llvm.get_host_cpu_features().get("avx512f"):
+            return None
+        lib = ctypes.CDLL(umath.__file__)
+        return (ctypes.cast(lib.__svml_exp8_ha, ctypes.c_void_p).value,
+                ctypes.cast(lib.__svml_atan28_ha, ctypes.c_void_p).value)
+    except (ImportError, AttributeError, OSError):
+        return None
+
+
+@functools.cache
+def _numpy_math() -> tuple[int, int, int]:
+    rng = np.random.default_rng(20261122)
+    x = np.concatenate([rng.uniform(-500.0, 500.0, 4096), rng.uniform(-3.0, 3.0, 4096),
+                        [0.0, -0.0, 1e-300, -1e-300, 1.0, -1.0, 500.0, -500.0]])
+    y, z = rng.normal(size=(2, 8195)) * np.repeat([1.0, 1e-3, 1e3], [4096, 2048, 2051])
+    y[:4], z[:4] = [0.0, -0.0, 1.0, -1.0], [-0.0, 0.0, 0.0, -0.0]
+    expected = (np.exp(x), np.arctan2(y, z))
+    candidates = [(MATH_LIBM, 0, 0)]
+    svml = _svml_entry_points()
+    if svml is not None:
+        candidates.insert(0, (MATH_SVML, *svml))
+    for mode in candidates:
+        got = _probe_math(x, y, z, np.array(mode, np.int64))
+        if all(np.array_equal(g.view(np.int64), e.view(np.int64)) for g, e in zip(got, expected)):
+            return mode
+    return (MATH_NUMPY, 0, 0)
+
+
+def numpy_math() -> np.ndarray:
+    """``math_fns`` for :func:`np_exp` and :func:`np_arctan2`: the first of numpy's SVML routines
+    (what numpy 2 calls on x86-64 with AVX-512), then the C library's, whose results match numpy's
+    on a probe of some 8,000 arguments here; else numpy itself, called from the kernel (about a
+    microsecond a call). Probed once per process."""
+    return np.array(_numpy_math(), np.int64)
+
+
+# ------------------------------------------------------------ end of numpy's numbers, in kernels
 
 
 @njit(cache=True, inline="always", error_model="numpy")
 def _wrap(angle_rad):
-    return (angle_rad + _PI) % _TWO_PI - _PI
+    """``(a + pi) % (2 pi) - pi``: Python/numpy float modulo semantics, as ``wrap_angle``. For
+    ``x = a + pi`` in ``(-2 pi, 2 pi)`` the modulo is ``x`` or ``x + 2 pi`` exactly (``fmod``
+    returns ``x``; a negative one is moved by the divisor), which skips the call to ``fmod``."""
+    x = angle_rad + _PI
+    if 0.0 <= x < _TWO_PI:
+        return x - _PI  # (-0.0 gives -pi here, +0.0 % 2 pi - pi there: the same)
+    if -_TWO_PI < x < 0.0:
+        return (x + _TWO_PI) - _PI
+    return x % _TWO_PI - _PI
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -108,75 +335,62 @@ def brain_update(
     # inbox, sorted by (receiver, sender); content row of each message
     receiver, sender_id, range_m, bearing_rad, content_row, c_known, c_distance, c_angle, c_p,
     c_heard_ids, c_heard_bearing,
-    # strategy
-    communicates, double, gain, beta, confidence_unit_m, gap_ticks,
-    # resumption after an exp (see the module docstring)
-    resume, exp_z, z_out,
+    # strategy; numpy's exp for the Fermi gain (see numpy_math)
+    communicates, double, gain, beta, confidence_unit_m, gap_ticks, math_fns,
     # outputs for the motor and send layers: goal vectors (2, N, 3) and who draws a new walk
     geometry, need, n_need,
 ):
     """Odometry, arrive, lost, receive (fusion) and remember-heard layers for one tick, then the
-    vectors the motor and send layers need (:func:`goal_vectors`).
-
-    Returns :data:`DONE`, or ``2 * m + goal`` when message ``m`` needs the Fermi gain of ``goal``:
-    ``z_out[0]`` is then its exponent; call again with ``resume`` = that code and ``exp_z`` =
-    ``exp(z_out[0])`` (numpy's). ``resume = DONE`` on the first call of a tick.
-    """
+    vectors the motor and send layers need (:func:`goal_vectors`)."""
     n = pose.shape[0]
     m_total = receiver.shape[0]
-    first_m = 0
-    first_goal = 0
-    if resume >= 0:
-        first_m = resume // 2
-        first_goal = resume % 2
-    else:
-        if do_odometry:
-            odometry(previous_pose, encoder_steps, metres_per_step, wheelbase_m, search_left_m,
-                     goal_p_m, True, pose)
-        area = classify_ground(ground, black_below, grey_below)
-        # -- arrive: store goal locations seen by the ground sensors, switch target
-        for i in range(n):
-            a = area[i]
-            for goal in range(2):
-                if a != goal:
-                    visit_ticks[i, goal] = 0
-                    continue
-                entering = visit_ticks[i, goal] == 0
-                count = visit_ticks[i, goal] + 1
-                visit_ticks[i, goal] = count
-                sx = pose[i, 0] + ground_ahead_m * math.cos(pose[i, 2])
-                sy = pose[i, 1] + ground_ahead_m * math.sin(pose[i, 2])
-                px = sx if entering else goal_xy[i, goal, 0]
-                py = sy if entering else goal_xy[i, goal, 1]
-                goal_xy[i, goal, 0] = px + (sx - px) / count
-                goal_xy[i, goal, 1] = py + (sy - py) / count
-                known[i, goal] = True
-                goal_p_m[i, goal] = 0.0
-                if use_cov:
-                    goal_cov[i, goal] = 0.0
-                if target[i] == goal or target[i] < 0:
-                    other = 1 - goal
-                    target[i] = other if known[i, other] else NONE
-                    searching[i] = False
-        # -- lost: arrived where the goal should be, and it is not there
-        for i in range(n):
-            if searching[i] and search_left_m[i] <= 0.0 and area[i] != target[i]:
-                known[i, 0] = False
-                known[i, 1] = False
-                goal_p_m[i, 0] = 0.0
-                goal_p_m[i, 1] = 0.0
-                if use_cov:
-                    goal_cov[i] = 0.0
-                target[i] = NONE
+    if do_odometry:
+        odometry(previous_pose, encoder_steps, metres_per_step, wheelbase_m, search_left_m,
+                 goal_p_m, True, pose)
+    area = classify_ground(ground, black_below, grey_below)
+    # -- arrive: store goal locations seen by the ground sensors, switch target
+    for i in range(n):
+        a = area[i]
+        for goal in range(2):
+            if a != goal:
+                visit_ticks[i, goal] = 0
+                continue
+            entering = visit_ticks[i, goal] == 0
+            count = visit_ticks[i, goal] + 1
+            visit_ticks[i, goal] = count
+            sx = pose[i, 0] + ground_ahead_m * math.cos(pose[i, 2])
+            sy = pose[i, 1] + ground_ahead_m * math.sin(pose[i, 2])
+            px = sx if entering else goal_xy[i, goal, 0]
+            py = sy if entering else goal_xy[i, goal, 1]
+            goal_xy[i, goal, 0] = px + (sx - px) / count
+            goal_xy[i, goal, 1] = py + (sy - py) / count
+            known[i, goal] = True
+            goal_p_m[i, goal] = 0.0
+            if use_cov:
+                goal_cov[i, goal] = 0.0
+            if target[i] == goal or target[i] < 0:
+                other = 1 - goal
+                target[i] = other if known[i, other] else NONE
                 searching[i] = False
-                lost_count[i] += 1
-        adopted[:] = False
+    # -- lost: arrived where the goal should be, and it is not there
+    for i in range(n):
+        if searching[i] and search_left_m[i] <= 0.0 and area[i] != target[i]:
+            known[i, 0] = False
+            known[i, 1] = False
+            goal_p_m[i, 0] = 0.0
+            goal_p_m[i, 1] = 0.0
+            if use_cov:
+                goal_cov[i] = 0.0
+            target[i] = NONE
+            searching[i] = False
+            lost_count[i] += 1
+    adopted[:] = False
 
     # -- receive: messages in (receiver, sender) order = the rank order of each receiver
     if communicates:
         n_heard = heard_ids.shape[1]
         n_partner = partner_ids.shape[1]
-        for m in range(first_m, m_total):
+        for m in range(m_total):
             rec = receiver[m]
             row = content_row[m]
             sender = sender_id[m]
@@ -192,30 +406,28 @@ def brain_update(
                     break
             if theirs < 0 or ours < 0:
                 continue
-            if not (resume >= 0 and m == first_m):
-                # One exchange per encounter: a recent partner still around is ignored.
-                recent = -1
-                for k in range(n_partner):
-                    if partner_ids[rec, k] == sender and partner_until[rec, k] > tick:
-                        recent = k
-                        break
-                slot = recent
-                if slot < 0:
-                    slot = 0
-                    for k in range(1, n_partner):
-                        if partner_until[rec, k] < partner_until[rec, slot]:
-                            slot = k
-                partner_ids[rec, slot] = sender
-                partner_until[rec, slot] = tick + gap_ticks
-                if recent >= 0:
-                    continue
+            # One exchange per encounter: a recent partner still around is ignored.
+            recent = -1
+            for k in range(n_partner):
+                if partner_ids[rec, k] == sender and partner_until[rec, k] > tick:
+                    recent = k
+                    break
+            slot = recent
+            if slot < 0:
+                slot = 0
+                for k in range(1, n_partner):
+                    if partner_until[rec, k] < partner_until[rec, slot]:
+                        slot = k
+            partner_ids[rec, slot] = sender
+            partner_until[rec, slot] = tick + gap_ticks
+            if recent >= 0:
+                continue
             gamma_sender = c_heard_bearing[row, theirs]
             gamma_own = heard_bearing_rad[rec, ours]
             range_own = heard_range_m[rec, ours]
             cos_t = math.cos(frame_pose[rec, 2])
             sin_t = math.sin(frame_pose[rec, 2])
-            start_goal = first_goal if (resume >= 0 and m == first_m) else 0
-            for goal in range(start_goal, 2):
+            for goal in range(2):
                 if not c_known[row, goal]:
                     continue
                 # eq. 27: the neighbour's goal in our body frame (of the crossing), then ours
@@ -248,11 +460,8 @@ def brain_update(
                     total = p_own + p_oth
                     g = p_own / total if total > 0.0 else 0.5
                     p_new = (1.0 - g) * p_own
-                else:  # eq. 24-26, the Fermi rule; exp comes from numpy
-                    if not (resume >= 0 and m == first_m and goal == first_goal):
-                        z_out[0] = _clip(-beta * (p_own - p_oth), -500.0, 500.0)
-                        return 2 * m + goal
-                    g = 1.0 / (1.0 + exp_z)
+                else:  # eq. 24-26, the Fermi rule, with numpy's exp
+                    g = 1.0 / (1.0 + np_exp(_clip(-beta * (p_own - p_oth), -500.0, 500.0), math_fns))
                     p_new = (1.0 - g) * p_own + g * p_oth
                 if use_cov:  # eq. 22 on the whole matrix: P <- (1 - g) P
                     scale = p_new / p_own if p_own > 0.0 else 0.0
@@ -313,7 +522,6 @@ def brain_update(
                     filled += 1
             lo = hi
     n_need[0] = goal_vectors(pose, previous_pose, goal_xy, target, turn_ticks, straight_ticks, geometry, need)
-    return DONE
 
 
 @njit(cache=True, error_model="numpy")
@@ -342,11 +550,10 @@ def goal_vectors(pose, frame_pose, goal_xy, target, turn_ticks, straight_ticks, 
 def motor_commands(
     pose, target, searching, search_left_m, turn_ticks, straight_ticks, turn_dir, geometry,
     atan, ir, cos_ir, sin_ir, cruise, spin, steering_gain, turn_in_place_rad,
-    arrival_tolerance_m, search_overshoot_m, avoid_threshold, vmax,
+    arrival_tolerance_m, search_overshoot_m, avoid_threshold, vmax, cmd,
 ):
-    """Wheel speeds ``(N, 2)`` of the forage, wander and avoid layers (seed 000 §5)."""
+    """Wheel speeds ``cmd`` ``(N, 2)`` of the forage, wander and avoid layers (seed 000 §5)."""
     n = pose.shape[0]
-    cmd = np.empty((n, 2))
     half_pi = _PI / 2
     for i in range(n):
         err = 0.0
@@ -395,25 +602,21 @@ def motor_commands(
                 right = cruise
         cmd[i, 0] = _clip(left, -vmax, vmax)
         cmd[i, 1] = _clip(right, -vmax, vmax)
-    return cmd
 
 
 @njit(cache=True, error_model="numpy")
-def report(frame_pose, geometry, atan, known, goal_p_m, heard_ids, heard_bearing_rad, communicates,
-           target, knows_both, pose):
-    """What the brains answer: the fields of the messages they send (if ``communicates``), their
-    state codes (:func:`state_codes`) and a copy of their poses.
+def report_into(frame_pose, geometry, atan, known, goal_p_m, heard_ids, heard_bearing_rad, target, knows_both, pose,
+                known_out, distance, angle, p, heard_ids_out, heard_bearing_out, state, pose_out):
+    """What the brains answer, into preallocated arrays: the fields of the messages they send,
+    their state codes (:func:`state_codes`) and a copy of their poses.
 
     Messages: each goal in the body frame of ``frame_pose`` (vectors ``geometry[:, :, 1:]`` and their
     ``atan``, see :func:`goal_vectors`), float32-rounded, zero where unknown, and copies of the
-    tables: ``(known, distance_m, angle_rad, p_m, heard_ids, heard_bearing_rad)``.
-    """
-    n = frame_pose.shape[0] if communicates else 0
-    distance = np.empty((n, 2))
-    angle = np.empty((n, 2))
-    p = np.empty((n, 2))
-    for i in range(n):
+    tables ``(known, distance_m, angle_rad, p_m, heard_ids, heard_bearing_rad)``, written for as
+    many robots as they have rows (none for a strategy that does not communicate)."""
+    for i in range(known_out.shape[0]):
         for g in range(2):
+            known_out[i, g] = known[i, g]
             if known[i, g]:
                 distance[i, g] = _f32(math.hypot(geometry[0, i, 1 + g], geometry[1, i, 1 + g]))
                 angle[i, g] = _f32(_wrap(atan[i, 1 + g] - frame_pose[i, 2]))
@@ -422,32 +625,122 @@ def report(frame_pose, geometry, atan, known, goal_p_m, heard_ids, heard_bearing
                 distance[i, g] = 0.0
                 angle[i, g] = 0.0
                 p[i, g] = 0.0
-    return (known[:n].copy(), distance, angle, p, heard_ids[:n].copy(), heard_bearing_rad[:n].copy(),
-            state_codes(target, known, knows_both), pose.copy())
+        for k in range(heard_ids.shape[1]):
+            heard_ids_out[i, k] = heard_ids[i, k]
+            heard_bearing_out[i, k] = heard_bearing_rad[i, k]
+    state_codes_into(target, known, knows_both, state)
+    pose_out[:] = pose
+
+
+#: Slots of the brain's constants in the ``params`` of :func:`act_tick` (the motor layers) and
+#: :func:`brain_tick` (all layers).
+(A_CRUISE, A_SPIN, A_STEERING_GAIN, A_TURN_IN_PLACE, A_ARRIVAL_TOLERANCE, A_SEARCH_OVERSHOOT, A_AVOID_THRESHOLD,
+ A_VMAX, A_TURN_LO, A_TURN_SPAN, A_STRAIGHT_LO, A_STRAIGHT_SPAN, A_SPIN_PER_TICK, A_TICK,
+ U_METRES_PER_STEP, U_WHEELBASE, U_BLACK_BELOW, U_GREY_BELOW, U_GROUND_AHEAD, U_BETA, U_CONFIDENCE_UNIT,
+ N_BRAIN_PARAMS) = range(22)
+#: Slots of the brain's integer settings in :func:`brain_tick`'s ``settings``.
+S_DO_ODOMETRY, S_USE_COV, S_COMMUNICATES, S_DOUBLE, S_GAIN, S_GAP_TICKS, S_KNOWS_BOTH, S_MOTORS, N_SETTINGS = range(9)
 
 
 @njit(cache=True, error_model="numpy")
-def act(pose, target, searching, search_left_m, turn_ticks, straight_ticks, turn_dir, geometry, atan, ir, cos_ir,
-        sin_ir, cruise, spin, steering_gain, turn_in_place_rad, arrival_tolerance_m, search_overshoot_m,
-        avoid_threshold, vmax, frame_pose, known, goal_p_m, heard_ids, heard_bearing_rad, communicates, knows_both):
-    """:func:`motor_commands` and :func:`report` in one call: ``(cmd, *report)``."""
-    cmd = motor_commands(pose, target, searching, search_left_m, turn_ticks, straight_ticks, turn_dir, geometry,
-                         atan, ir, cos_ir, sin_ir, cruise, spin, steering_gain, turn_in_place_rad,
-                         arrival_tolerance_m, search_overshoot_m, avoid_threshold, vmax)
-    known_c, distance, angle, p, ids_c, bearing_c, state, pose_c = report(
-        frame_pose, geometry, atan, known, goal_p_m, heard_ids, heard_bearing_rad, communicates, target,
-        knows_both, pose)
-    return cmd, known_c, distance, angle, p, ids_c, bearing_c, state, pose_c
+def wander_draws(need, n_need, rng_fn, rng_state, params, turn_ticks, turn_dir, straight_ticks):
+    """Start a new random-walk segment for the robots ``need[:n_need]``: a turn in place by
+    ``U(-pi, pi)``, then a straight run of ``U(lo, hi)`` seconds, from each robot's own generator
+    (``rng_fn[i]``, ``rng_state[i]``: see :func:`generator_address`), as its ``random(2)``
+    would give them: ``low + (high - low) * u`` is how numpy's ``uniform`` computes them. Ticks
+    are rounded half to even, as Python's ``round``."""
+    for q in range(n_need):
+        i = need[q]
+        u0 = _call_next_double(rng_fn[i], rng_state[i])
+        u1 = _call_next_double(rng_fn[i], rng_state[i])
+        angle = params[A_TURN_LO] + params[A_TURN_SPAN] * u0
+        straight_s = params[A_STRAIGHT_LO] + params[A_STRAIGHT_SPAN] * u1
+        turn_ticks[i] = round(abs(angle) / params[A_SPIN_PER_TICK])
+        turn_dir[i] = 1.0 if angle >= 0 else -1.0
+        straight_ticks[i] = round(straight_s / params[A_TICK])
+
+
+@njit(cache=True, error_model="numpy")
+def act_tick(pose, target, searching, search_left_m, turn_ticks, straight_ticks, turn_dir, geometry, atan, ir,
+             cos_ir, sin_ir, params, need, n_need, rng_fn, rng_state, frame_pose, known, goal_p_m, heard_ids,
+             heard_bearing_rad, knows_both, cmd, known_out, distance, angle, p, heard_ids_out, heard_bearing_out,
+             state, pose_out, on_path):
+    """The brains' answer for one tick in one call: :func:`wander_draws` for the robots
+    :func:`goal_vectors` put in ``need``, :func:`motor_commands` into ``cmd``,
+    :func:`report_into` and ``on_path`` (a target and both goals known: state bits 0-1 and
+    ``knows_both``, as ``protocol.epuck.on_path`` reads the state codes)."""
+    wander_draws(need, n_need[0], rng_fn, rng_state, params, turn_ticks, turn_dir, straight_ticks)
+    motor_commands(pose, target, searching, search_left_m, turn_ticks, straight_ticks, turn_dir, geometry, atan, ir,
+                   cos_ir, sin_ir, params[A_CRUISE], params[A_SPIN], params[A_STEERING_GAIN],
+                   params[A_TURN_IN_PLACE], params[A_ARRIVAL_TOLERANCE], params[A_SEARCH_OVERSHOOT],
+                   params[A_AVOID_THRESHOLD], params[A_VMAX], cmd)
+    report_into(frame_pose, geometry, atan, known, goal_p_m, heard_ids, heard_bearing_rad, target, knows_both, pose,
+                known_out, distance, angle, p, heard_ids_out, heard_bearing_out, state, pose_out)
+    for i in range(state.shape[0]):
+        on_path[i] = (state[i] & 3) != 0 and (state[i] & knows_both) != 0
+
+
+@njit(cache=True, error_model="numpy")
+def brain_tick(
+    # this tick's percepts and the tick number
+    encoder_steps, ir, ground, tick,
+    # state, updated in place (see ForagingBrain); pose is written, from previous_pose
+    previous_pose, pose, frame_pose, robot_ids, known, goal_xy, goal_p_m, goal_cov, target, searching,
+    search_left_m, lost_count, visit_ticks, turn_ticks, straight_ticks, turn_dir, heard_ids, heard_bearing_rad,
+    heard_range_m, partner_ids, partner_until, adopted,
+    # inbox, sorted by (receiver, sender); content row of each message
+    receiver, sender_id, range_m, bearing_rad, content_row, c_known, c_distance, c_angle, c_p, c_heard_ids,
+    c_heard_bearing,
+    # constants (slots A_*, U_* and S_*), numpy's math (numpy_math), each robot's generator
+    params, settings, math_fns, rng_fn, rng_state, cos_ir, sin_ir,
+    # scratch: goal vectors (2, N, 3), their angles (N, 3), robots drawing a new walk
+    geometry, atan, need, n_need,
+    # the answer (see act_tick)
+    cmd, known_out, distance, angle, p, heard_ids_out, heard_bearing_out, state, pose_out, on_path,
+):
+    """One controller tick of every brain of the batch in one call: :func:`brain_update`, the
+    angles of its goal vectors (numpy's ``arctan2``: :func:`np_arctan2`), then :func:`act_tick`,
+    or, if ``settings[S_MOTORS]`` is 0 (the caller drives the wheels itself), only the report
+    (:func:`report_into`) and ``on_path``."""
+    brain_update(
+        settings[S_DO_ODOMETRY] != 0, encoder_steps, previous_pose, params[U_METRES_PER_STEP], params[U_WHEELBASE],
+        pose, frame_pose, robot_ids, known, goal_xy, goal_p_m, goal_cov, settings[S_USE_COV] != 0, target, searching,
+        search_left_m, lost_count, visit_ticks, turn_ticks, straight_ticks, heard_ids, heard_bearing_rad,
+        heard_range_m, partner_ids, partner_until, adopted,
+        ground, params[U_BLACK_BELOW], params[U_GREY_BELOW], params[U_GROUND_AHEAD], tick,
+        receiver, sender_id, range_m, bearing_rad, content_row, c_known, c_distance, c_angle, c_p, c_heard_ids,
+        c_heard_bearing,
+        settings[S_COMMUNICATES] != 0, settings[S_DOUBLE] != 0, settings[S_GAIN], params[U_BETA],
+        params[U_CONFIDENCE_UNIT], settings[S_GAP_TICKS], math_fns,
+        geometry, need, n_need,
+    )
+    m = atan.shape[0] * atan.shape[1]
+    np_arctan2(geometry[1].reshape(m), geometry[0].reshape(m), atan.reshape(m), math_fns)
+    if settings[S_MOTORS] != 0:
+        act_tick(pose, target, searching, search_left_m, turn_ticks, straight_ticks, turn_dir, geometry, atan, ir,
+                 cos_ir, sin_ir, params, need, n_need, rng_fn, rng_state, previous_pose, known, goal_p_m, heard_ids,
+                 heard_bearing_rad, settings[S_KNOWS_BOTH], cmd, known_out, distance, angle, p, heard_ids_out,
+                 heard_bearing_out, state, pose_out, on_path)
+    else:
+        knows_both = settings[S_KNOWS_BOTH]
+        report_into(previous_pose, geometry, atan, known, goal_p_m, heard_ids, heard_bearing_rad, target, knows_both,
+                    pose, known_out, distance, angle, p, heard_ids_out, heard_bearing_out, state, pose_out)
+        for i in range(state.shape[0]):
+            on_path[i] = (state[i] & 3) != 0 and (state[i] & knows_both) != 0
 
 
 @njit(cache=True, error_model="numpy")
 def state_codes(target, known, knows_both):
     """Controller state codes: target + 1 (0 = none) in bits 0-1, ``knows_both`` if both known."""
-    n = target.shape[0]
-    out = np.empty(n, np.int64)
-    for i in range(n):
+    out = np.empty(target.shape[0], np.int64)
+    state_codes_into(target, known, knows_both, out)
+    return out
+
+
+@njit(cache=True, error_model="numpy")
+def state_codes_into(target, known, knows_both, out):
+    for i in range(target.shape[0]):
         code = 0 if target[i] < 0 else target[i] + 1
         if known[i, 0] and known[i, 1]:
             code |= knows_both
         out[i] = code
-    return out

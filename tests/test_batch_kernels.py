@@ -5,23 +5,48 @@ neighbour search is checked against brute force, the collision kernel against th
 it stands in for (bit for bit), merged random draws against numpy's own, the Fermi fusion (whose
 exp is numpy's) against the pure filter functions, and a swarm brain against per-robot brains fed
 through the wire format, which is what the world-server and agent processes do.
+
+The per-tick kernels draw from numpy generators and evaluate numpy's ``exp`` and ``arctan2``
+themselves: their numbers are checked against numpy's, and a world tick against the public model
+functions it stands in for (sensors, medium, kinematics, collisions, metrics), including poses
+changed between the calls and buffers too small for the swarm. The batch engine's compiled tick
+(deploy/batch.py) must leave the world and the brains as their methods do.
 """
 
 from __future__ import annotations
 
+import copy
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
+from numba import njit
 
+from swarmloc.agents import kernels as agent_kernels
 from swarmloc.agents.foraging import AgentConfig, ForagingBrain, Inbox, SocialMessages, agent_rng
 from swarmloc.agents.social_odometry import sgiff_update
-from swarmloc.deploy.batch import inbox_from, swarm_brain
+from swarmloc.deploy.batch import CompiledTicks, inbox_from, run_ticks, swarm_brain
 from swarmloc.deploy.scenario import load_scenario
-from swarmloc.protocol.epuck import EpuckBody, on_path
+from swarmloc.protocol.epuck import (
+    EpuckBody,
+    ground_sensor_point,
+    integrate_pose,
+    on_path,
+    wrap_angle,
+)
 from swarmloc.world import kernels
-from swarmloc.world.arena import Arena, Disc, _resolve_collisions_kdtree, resolve_collisions
+from swarmloc.world.arena import (
+    Arena,
+    Disc,
+    _resolve_collisions_kdtree,
+    area_at,
+    resolve_collisions,
+)
 from swarmloc.world.foraging import ForagingWorld
+from swarmloc.world.medium import deliver
+from swarmloc.world.metrics import ForagingMetrics
+from swarmloc.world.sensors import ground_sensors, ir_proximity
 
 R = 0.035
 
@@ -230,3 +255,239 @@ def test_collisions_from_the_sensing_pairs_equal_a_fresh_search():
             np.testing.assert_array_equal(fresh, _resolve_collisions_kdtree(pos, R, _arena(3.0), None, 2))
             compared += 1
     assert compared == 3
+
+
+# ------------------------------------------------------------- the kernels' numbers are numpy's
+
+
+def test_kernels_draw_numpys_numbers_and_advance_the_generator_as_numpy():
+    for seed in ([3, 0], [3, 1, 7]):
+        rng, twin = np.random.default_rng(seed), np.random.default_rng(seed)
+        fn, state = kernels.generator_address(rng)
+        out = np.empty(1000)
+        kernels.fill_random(out[:5], fn, state)
+        kernels.fill_random(out[5:], fn, state)
+        np.testing.assert_array_equal(out, twin.random(1000))
+        assert rng.random() == twin.random()  # the generator's own state moved on
+    with pytest.raises(TypeError, match="rng"):
+        kernels.generator_address(np.random.RandomState(1))
+
+
+def test_wander_draws_are_each_robots_own_uniforms_rounded_half_to_even():
+    brain = ForagingBrain(AgentConfig(), EpuckBody(), np.arange(5), [agent_rng(9, i) for i in range(5)], 0.1)
+    twins = [agent_rng(9, i) for i in range(5)]
+    fn, state = brain._rng_addresses()
+    p = brain._params
+    need = np.array([3, 0, 4, 0, 0])
+    turn, turn_dir, straight = np.zeros(5, np.int64), np.zeros(5), np.zeros(5, np.int64)
+    agent_kernels.wander_draws(need, 3, fn, state, p, turn, turn_dir, straight)
+    lo, hi = AgentConfig().wander_straight_s
+    for i in (3, 0, 4):
+        # what each agent drew before the kernels: uniform((-pi, lo), (pi, hi)) of its generator
+        angle, straight_s = twins[i].uniform((-math.pi, lo), (math.pi, hi))
+        assert turn[i] == round(abs(angle) / p[agent_kernels.A_SPIN_PER_TICK])
+        assert turn_dir[i] == (1.0 if angle >= 0 else -1.0)
+        assert straight[i] == round(straight_s / p[agent_kernels.A_TICK])
+    assert turn[1] == turn[2] == 0  # robots not in need draw nothing
+    for rng, twin in zip(brain.rngs, twins):
+        assert rng.random() == twin.random()
+    # Python's round() sends halves to the even neighbour, and so must the kernel: a turn of
+    # exactly 2.5 ticks and a run of exactly 3.5 ticks (powers of two: no rounding on the way).
+    q = p.copy()
+    q[agent_kernels.A_TURN_LO], q[agent_kernels.A_TURN_SPAN], q[agent_kernels.A_SPIN_PER_TICK] = -1.25, 0.0, 0.5
+    q[agent_kernels.A_STRAIGHT_LO], q[agent_kernels.A_STRAIGHT_SPAN], q[agent_kernels.A_TICK] = 1.75, 0.0, 0.5
+    agent_kernels.wander_draws(np.array([1]), 1, fn, state, q, turn, turn_dir, straight)
+    assert (turn[1], turn_dir[1], straight[1]) == (2, -1.0, 4)
+
+
+@njit
+def _exp_each(module_np_exp, x, math_fns):
+    out = np.empty_like(x)
+    for q in range(x.shape[0]):
+        out[q] = module_np_exp(x[q], math_fns)
+    return out
+
+
+def _bits(a):
+    return np.asarray(a, float).view(np.int64)
+
+
+@pytest.mark.parametrize("module", [kernels, agent_kernels], ids=["world", "agents"])
+def test_kernels_exp_and_arctan2_are_numpys_bit_for_bit(module):
+    rng = np.random.default_rng(11)
+    x = np.concatenate([rng.uniform(-500.0, 500.0, 3000), rng.uniform(-2.0, 2.0, 3000), [0.0, -0.0, 1e-300]])
+    y, z = rng.normal(size=(2, 4000)) * np.repeat([1.0, 1e-4, 1e4], [2000, 1000, 1000])
+    y[:6], z[:6] = [0.0, -0.0, 0.0, -0.0, 1.0, -1.0], [0.0, 0.0, -0.0, -0.0, 0.0, -0.0]
+    modes = [module.numpy_math(), np.array([module.MATH_NUMPY, 0, 0])]  # this machine's; numpy from the kernel
+    for fns in modes:
+        np.testing.assert_array_equal(_bits(_exp_each(module.np_exp, x, fns)), _bits(np.exp(x)))
+        for n in (0, 1, 7, 8, 9, 17, 4000):  # whole vectors of 8 and zero-padded tails
+            out = np.full(n, np.nan)
+            module.np_arctan2(y[:n], z[:n], out, fns)
+            np.testing.assert_array_equal(_bits(out), _bits(np.arctan2(y[:n], z[:n])))
+        out = np.full(2000, np.nan)  # strided views
+        module.np_arctan2(y[::2], z[::2], out, fns)
+        np.testing.assert_array_equal(_bits(out), _bits(np.arctan2(y[::2], z[::2])))
+    # The C library's branch gives the C library's numbers (used where they are numpy's).
+    libm = np.array([module.MATH_LIBM, 0, 0])
+    assert list(_exp_each(module.np_exp, x[:200], libm)) == [math.exp(v) for v in x[:200]]
+    out = np.empty(200)
+    module.np_arctan2(y[:200], z[:200], out, libm)
+    assert list(out) == [math.atan2(a, b) for a, b in zip(y[:200], z[:200])]
+
+
+def test_world_and_agents_carry_the_same_numerics_block():
+    # The two packages share no code but the protocol, so each kernel module carries the block
+    # that gets numpy's numbers; it must stay the same in both.
+    def block(path):
+        text = (Path(kernels.__file__).parent.parent / path).read_text()
+        start = text.index("numpy's numbers, in kernels")
+        return text[start:text.index("end of numpy's numbers, in kernels")]
+
+    assert block("world/kernels.py") == block("agents/kernels.py")
+
+
+def test_wrap_skips_fmod_but_keeps_numpys_modulo():
+    rng = np.random.default_rng(2)
+    edges = [0.0, -0.0, math.pi, -math.pi, 2 * math.pi, -2 * math.pi, 3 * math.pi, -3 * math.pi, 1e300, -1e300]
+    edges += [np.nextafter(v, d) for v in (math.pi, -math.pi, 3 * math.pi, -3 * math.pi) for d in (-10, 10)]
+    a = np.concatenate([rng.uniform(-20.0, 20.0, 20000), edges])
+    expected = _bits(wrap_angle(a))  # (a + pi) % (2 pi) - pi in numpy
+
+    @njit
+    def each(f, a):
+        out = np.empty_like(a)
+        for q in range(a.shape[0]):
+            out[q] = f(a[q])
+        return out
+
+    np.testing.assert_array_equal(_bits(each(kernels.wrap, a)), expected)
+    np.testing.assert_array_equal(_bits(each(agent_kernels._wrap, a)), expected)
+
+
+# ------------------------------------------------------------------ a world tick, by its models
+
+
+def _reference_observe(world, pose, rng):
+    """What observe() must give, from the public model functions (numpy draws)."""
+    cfg = world.config
+    ir = ir_proximity(pose, cfg.body.body_radius_m, world.arena, cfg.sensors, rng)
+    ground = ground_sensors(pose, world.arena, cfg.sensors, rng)
+    return ir, ground
+
+
+def _reference_step(world, pose, cmd, sending, rng):
+    """What step() must do, from the public model functions: the medium (world/medium.py:
+    deliver), the slip, the kinematics (protocol/epuck.py) and the collisions (world/arena.py)."""
+    cfg, body = world.config, world.config.body
+    alive = world.alive
+    steps = np.where(alive[:, None], np.clip(cmd, -body.max_wheel_speed_steps_s, body.max_wheel_speed_steps_s)
+                     * cfg.tick_s, 0.0)
+    heard = deliver(pose, sending & alive, cfg.medium, rng)
+    s = cfg.odometry.slip_fraction
+    du = steps * body.metres_per_step * (1.0 + rng.uniform(-s, s, (len(pose), 2)))
+    moved = integrate_pose(pose, du[:, 0], du[:, 1], body.wheelbase_m)
+    moved[:, :2] = resolve_collisions(moved[:, :2], body.body_radius_m, world.arena, iterations=2)
+    return moved, steps, heard
+
+
+@pytest.mark.parametrize("case", ["plain", "crowd", "moved_in_between", "small_buffers"])
+def test_world_ticks_are_the_model_functions(case):
+    scenario = load_scenario("ES1", ["world.robots=30", "agent.strategy=SSGIKF", "world.duration_s=12"])
+    world = ForagingWorld(scenario.world)
+    brain = swarm_brain(scenario)
+    if case == "crowd":  # bodies on top of each other: the KD-tree collisions of arena.py
+        world.pose[:, :2] = 0.6 + np.random.default_rng(1).uniform(-0.06, 0.06, (30, 2))
+    reference = ForagingMetrics(30, scenario.world.tick_s)
+    nudge = np.random.default_rng(5)
+    sent, heard, delivered = None, None, 0
+    while not world.done:
+        if world.tick == 40:
+            world.kill(3)
+        if case == "small_buffers":  # the pairs and the messages do not fit: grown, or allocated
+            world._pair_buffers(1)
+            world._work_i, world._work_f = np.empty((5, 1), np.int64), np.empty((7, 1))
+        if case == "moved_in_between" and world.tick % 3 == 1:  # in place, after the last step
+            world.pose[::4, :2] += nudge.uniform(-0.02, 0.02, (8, 2))
+        rng = copy.deepcopy(world.rng)
+        pose = world.pose.copy()
+        obs = world.observe()
+        ir, ground = _reference_observe(world, pose, rng)
+        np.testing.assert_array_equal(obs.ir, ir)
+        np.testing.assert_array_equal(obs.ground, ground)
+        if heard is not None:
+            live = world.alive[heard.receiver]
+            for got, want in zip((obs.deliveries.sender, obs.deliveries.receiver, obs.deliveries.range_m,
+                                  obs.deliveries.bearing_rad),
+                                 (heard.sender, heard.receiver, heard.range_m, heard.bearing_rad)):
+                np.testing.assert_array_equal(got, want[live])
+            delivered += len(obs.deliveries)
+        out = brain.step(obs.encoder_steps, obs.ir, obs.ground, inbox_from(obs, sent, brain.robot_ids))
+        np.testing.assert_array_equal(out.on_path, on_path(out.state))
+        if case == "moved_in_between" and world.tick % 3 == 2:  # in place, after sensing
+            world.pose[1::5, :2] += nudge.uniform(-0.02, 0.02, (6, 2))
+        pose = world.pose.copy()
+        moved, steps, heard = _reference_step(world, pose, out.wheel_speed_steps_s, out.sending, rng)
+        world.step(out.wheel_speed_steps_s, out.sending, out.on_path)
+        np.testing.assert_array_equal(world.pose, moved)
+        np.testing.assert_array_equal(world.encoder_steps, steps)
+        reference.update(world.tick, area_at(ground_sensor_point(moved), world.arena), out.on_path & world.alive)
+        assert world.rng.random() == rng.random()  # no draw more, none less
+        world.rng = rng  # the twin goes on (the kernels find its numbers' address anew)
+        sent = out
+    assert world.metrics.summary() == reference.summary()
+    assert delivered > 100  # messages did cross
+
+
+# --------------------------------------------------------- the batch engine's compiled ticks
+
+
+def _swarm_state(world, brain):
+    return [world.pose, world.encoder_steps, world.tick, world.metrics.summary(), world.rng.random(),
+            brain.pose, *brain.pose_history, brain.tick, brain.known, brain.goal_xy, brain.goal_p_m, brain.target,
+            brain.searching, brain.search_left_m, brain.lost_count, brain.visit_ticks, brain.turn_ticks,
+            brain.straight_ticks, brain.turn_dir, brain.heard_ids, brain.heard_bearing_rad, brain.heard_range_m,
+            brain.partner_ids, brain.partner_until, [g.random() for g in brain.rngs]]
+
+
+@pytest.mark.parametrize("case", ["NC", "SSGIKF", "DSGIFF", "GLOBAL_RB", "crowd", "no_room"])
+def test_compiled_ticks_leave_world_and_brains_as_their_methods_do(case):
+    strategy = case if case in ("NC", "SSGIKF", "DSGIFF", "GLOBAL_RB") else "SSGIFF"
+    scenario = load_scenario("ES1", ["world.robots=20", f"agent.strategy={strategy}", "world.duration_s=15"])
+    runs = []
+    for compiled in (True, False):
+        world, brain = ForagingWorld(scenario.world), swarm_brain(scenario)
+        if case == "crowd":
+            world.pose[:, :2] = 0.6 + np.random.default_rng(2).uniform(-0.05, 0.05, (20, 2))
+        seen = []
+
+        def between(world=world, brain=brain, seen=seen):
+            # what a central system sees between the brains' step and the world's; it may also
+            # change the brains (here: robot 0 forgets the nest every 40 ticks)
+            seen.append((world.tick, brain.tick, world.pose.copy(), brain.pose.copy(), brain.goal_xy.copy()))
+            if world.tick % 40 == 39:
+                brain.known[0, 0] = False
+            if case == "no_room" and world.tick % 7 == 0:
+                world._pair_buffers(1)  # the pairs will not fit: found again, with room
+
+        assert CompiledTicks.usable(world, brain)
+        run_ticks(world, brain, between, compiled=compiled)
+        runs.append((_swarm_state(world, brain), seen))
+    (state, seen), (state_ref, seen_ref) = runs
+    assert len(seen) == len(seen_ref) == scenario.world.n_ticks
+    for a, b in zip(seen, seen_ref):
+        for x, y in zip(a, b):
+            np.testing.assert_array_equal(x, y)
+    for x, y in zip(state, state_ref):
+        np.testing.assert_array_equal(x, y)
+
+
+def test_compiled_ticks_are_for_a_whole_swarm_in_index_order_without_covariances():
+    scenario = load_scenario("ES1", ["world.duration_s=5"])
+    world = ForagingWorld(scenario.world)
+    assert not CompiledTicks.usable(world, swarm_brain(scenario, [0, 1]))
+    assert not CompiledTicks.usable(world, swarm_brain(scenario, np.arange(10)[::-1]))
+    sikf = load_scenario("ES1", ["world.duration_s=5", "agent.strategy=SSIKF"])
+    assert not CompiledTicks.usable(world, swarm_brain(sikf))
+    with pytest.raises(ValueError, match="brain"):
+        CompiledTicks(world, swarm_brain(sikf))

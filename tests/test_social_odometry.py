@@ -40,9 +40,12 @@ def _a(*values) -> np.ndarray:
 # ---------------------------------------------------------------------------------------------
 
 
-def test_registry_has_the_five_strategies_of_the_paper_and_the_sikf_pair():
-    # Seed 000 §6.1's five, plus the SIKF of eq. 18-22 (seed 001's "covariance knowledge").
-    assert set(STRATEGIES) == {"NC", "SSGIKF", "DSGIKF", "SSGIFF", "DSGIFF", "SSIKF", "DSIKF"}
+def test_registry_has_the_five_strategies_of_the_paper_the_sikf_pair_and_global_imitation():
+    # Seed 000 §6.1's five, the SIKF of eq. 18-22 (seed 001's "covariance knowledge") and seed
+    # 001's global imitation by a central system and by long-range boards.
+    assert set(STRATEGIES) == {"NC", "SSGIKF", "DSGIKF", "SSGIFF", "DSGIFF", "SSIKF", "DSIKF",
+                               "GLOBAL", "GLOBAL_RB"}
+    assert {n for n, s in STRATEGIES.items() if s.central} == {"GLOBAL", "GLOBAL_RB"}
 
 
 @pytest.mark.parametrize(

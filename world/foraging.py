@@ -16,9 +16,11 @@ Per tick ``k`` (lockstep, seed 000 §5 controller clock of 10 Hz):
 The world owns all physical randomness, one generator drawn in a fixed order (IR noise, ground
 noise; loss, range noise, bearing noise, slip), so that a seeded run is the same whether the
 agents are processes or the batch engine's arrays. Consecutive draws are merged into one
-``rng.random`` call where that gives the same numbers (see ``world/kernels.py``: ``uniform``), and
-the per-robot loops run in the compiled kernels of ``world/kernels.py``. A dead robot
-(``alive`` false) stands still, sends nothing and hears nothing; it stays an obstacle.
+``random`` call where that gives the same numbers (see ``world/kernels.py``: ``uniform``). Each
+of :meth:`ForagingWorld.observe` and :meth:`ForagingWorld.step` is one call of a compiled kernel
+of ``world/kernels.py`` (``observe_tick``, ``step_tick``), which draws from the world's generator
+itself, the same numbers in the same order. A dead robot (``alive`` false) stands still, sends
+nothing and hears nothing; it stays an obstacle.
 """
 
 from __future__ import annotations
@@ -37,7 +39,7 @@ from swarmloc.world.arena import (
     arena_discs,
     resolve_collisions,
 )
-from swarmloc.world.medium import Deliveries, RabMedium, crossing, deliver
+from swarmloc.world.medium import Deliveries, RabMedium
 from swarmloc.world.metrics import ForagingMetrics
 from swarmloc.world.sensors import SensorParams
 
@@ -45,7 +47,7 @@ _COS_IR = np.cos(IR_SENSOR_ANGLES_RAD)
 _SIN_IR = np.sin(IR_SENSOR_ANGLES_RAD)
 _N_IR = IR_SENSOR_ANGLES_RAD.shape[0]
 _N_GROUND = GROUND_SENSOR_OFFSETS_M.shape[0]
-_NO_PAIRS = np.empty(0, np.int64)
+_C_CROSSED, _C_PAIRS = kernels.C_CROSSED, kernels.C_PAIRS
 #: Collision-resolution iterations per tick (resolve_collisions' default).
 _COLLISION_ITERATIONS = 2
 
@@ -197,19 +199,56 @@ class ForagingWorld:
         self.config = config
         self.rng = rng if rng is not None else np.random.default_rng([config.seed, WORLD_STREAM])
         self.arena = config.arena.arena()
-        n = config.robots
+        n = self._n = config.robots
         self.pose = initial_poses(config, self.rng)
         self.alive = np.ones(n, bool)
         self.tick = 0
         self.encoder_steps = np.zeros((n, 2))
-        self._deliveries = deliver(self.pose, np.zeros(n, bool), config.medium, self.rng)
         self.metrics = ForagingMetrics(n, config.tick_s)
         self._n_ticks = config.n_ticks
-        self._pairs: tuple = (None, None)  # (poses, neighbour pairs found at them by observe())
-        # Pairs for the IR sensors, the medium and the collisions of the step after.
-        self._pair_cutoff_m = max(
-            config.medium.range_m, 2.0 * config.body.body_radius_m + config.sensors.ir_range_m
+        # The compiled tick (world/kernels.py: observe_tick, step_tick): constants, and buffers
+        # that the two calls share. Pairs for the IR sensors, the medium and the collisions of the
+        # step after are found when sensing, within the larger of the two reaches.
+        body, medium = config.body, config.medium
+        self._params = kernels.world_params(
+            body_radius_m=body.body_radius_m, ir_range_m=config.sensors.ir_range_m,
+            width_m=self.arena.width_m, height_m=self.arena.height_m,
+            ir_noise=config.sensors.ir_noise_fraction, ground_noise=config.sensors.ground_noise_fraction,
+            pair_cutoff_m=max(medium.range_m, 2.0 * body.body_radius_m + config.sensors.ir_range_m),
+            rab_range_m=medium.range_m, range_noise_m=medium.range_noise_m,
+            bearing_noise_rad=medium.bearing_noise_rad, near_m=medium.near_m, loss_near=medium.loss_near,
+            loss_far=medium.loss_far, max_received=medium.max_received_per_tick,
+            vmax=body.max_wheel_speed_steps_s, tick_s=config.tick_s, metres_per_step=body.metres_per_step,
+            slip_fraction=config.odometry.slip_fraction, wheelbase_m=body.wheelbase_m,
+            iterations=_COLLISION_ITERATIONS, ahead_m=GROUND_SENSOR_OFFSETS_M[1, 0],
         )
+        self._discs = arena_discs(self.arena)
+        self._counts = np.zeros(kernels.N_COUNTS, np.int64)
+        self._counts[kernels.C_PAIRS] = -1  # no pairs found yet
+        self._pair_buffers(8 * n + 16)
+        self._noise_u = np.empty(n * (_N_IR + _N_GROUND))  # room for observe's uniforms
+        self._per_robot = np.empty((2, n + 1), np.int64)
+        self._snapshot = np.empty((n, 3))  # the poses the pairs were found at
+        self._trig = np.empty((2, n))  # cosines and sines of the headings of the poses _trig_pose
+        self._trig_pose = np.full((n, 3), np.nan)
+        # Messages that crossed at the last step, heard at the next observe: (sender, receiver)
+        # and the (range, bearing) measured; at most max_received_per_tick per receiver.
+        k_max = n * medium.max_received_per_tick
+        self._crossed_ij = np.empty((2, k_max), np.int64)
+        self._crossed_f = np.empty((2, k_max))
+        self._step_u = np.empty(2 * k_max + 2 * n)  # room for step's uniforms
+        self._rng_address: tuple = (None, 0, 0)  # (generator, next_double, state)
+        self._math = kernels.numpy_math()  # numpy's arctan2, bit for bit
+
+    def _pair_buffers(self, capacity: int) -> None:
+        """Room for ``capacity`` neighbour pairs (world/kernels.py: neighbour_pairs_into) and for
+        the messages they may carry (step_tick's scratch)."""
+        self._counts[_C_PAIRS] = -1  # the pairs found, if any, were in the old buffers
+        self._pair_ij = np.empty((2, capacity), np.int64)
+        self._pair_f = np.empty((3, capacity))
+        self._pair_scratch = np.empty((2, capacity), np.int64)
+        self._work_i = np.empty((5, 2 * capacity), np.int64)
+        self._work_f = np.empty((7, 2 * capacity))
 
     @property
     def n_robots(self) -> int:
@@ -219,75 +258,105 @@ class ForagingWorld:
     def done(self) -> bool:
         return self.tick >= self._n_ticks
 
+    def _rng_addresses(self) -> tuple[int, int]:
+        """Where the kernels draw from ``self.rng`` (world/kernels.py: generator_address)."""
+        rng, fn, state = self._rng_address
+        if rng is not self.rng:
+            fn, state = kernels.generator_address(self.rng)
+            self._rng_address = (self.rng, fn, state)
+        return fn, state
+
     def observe(self) -> Observation:
+        """Every robot's percepts at the current poses (one compiled call: see
+        ``world/kernels.py: observe_tick``). Draws: IR noise ``(N, 8)`` then ground noise
+        ``(N, 3)``, as one ``random(11 N)``: the numbers of ir_proximity's and ground_sensors'
+        two ``uniform()`` calls (world/sensors.py)."""
         if self.tick == 0:
             _load_kernels(self.config)
-        cfg = self.config
-        # ir_proximity and ground_sensors (world/sensors.py) in one kernel call, with one
-        # random() call for both noises: the same numbers, in the same order, as their two
-        # uniform() calls. The robot pairs it finds are those that the medium and the collisions
-        # of step() need at these same poses: kept.
-        n = self.n_robots
-        f, g = cfg.sensors.ir_noise_fraction, cfg.sensors.ground_noise_fraction
-        ir, ground, pairs = kernels.sense(
-            self.pose, cfg.body.body_radius_m, cfg.sensors.ir_range_m, self.arena.width_m,
-            self.arena.height_m, _COS_IR, _SIN_IR, -f, f - -f, GROUND_SENSOR_OFFSETS_M,
-            arena_discs(self.arena), REFLECTANCE_BY_AREA, -g, g - -g,
-            self.rng.random(n * (_N_IR + _N_GROUND)), self._pair_cutoff_m,
-        )
-        self._pairs = (self.pose, pairs)
-        deliveries = self._deliveries
-        if not self.alive.all() and deliveries.receiver.shape[0]:
-            keep = self.alive[deliveries.receiver]
-            deliveries = Deliveries(
-                deliveries.sender[keep],
-                deliveries.receiver[keep],
-                deliveries.range_m[keep],
-                deliveries.bearing_rad[keep],
-            )
-        return Observation(self.tick, self.encoder_steps.copy(), ir, ground, deliveries)
+        n, counts = self._n, self._counts
+        ir = np.empty((n, _N_IR))
+        ground = np.empty((n, _N_GROUND))
+        k = int(counts[_C_CROSSED])
+        sender, receiver = np.empty(k, np.int64), np.empty(k, np.int64)
+        range_m, bearing_rad = np.empty(k), np.empty(k)
+        while True:
+            kept = kernels.observe_tick(*self._observe_args(self.pose, ir, ground, sender, receiver, range_m, bearing_rad))
+            if kept >= 0:
+                break
+            self._grow_pairs()  # nothing drawn yet
+        if kept < k:  # dead receivers hear nothing
+            sender, receiver, range_m, bearing_rad = sender[:kept], receiver[:kept], range_m[:kept], bearing_rad[:kept]
+        return Observation(self.tick, self.encoder_steps.copy(), ir, ground,
+                           Deliveries(sender, receiver, range_m, bearing_rad))
 
     def step(self, wheel_speed_steps_s: np.ndarray, sending: np.ndarray, on_path: np.ndarray):
-        """Apply one tick of wheel commands ``(N, 2)`` (steps/s, left and right)."""
-        cfg = self.config
+        """Apply one tick of wheel commands ``(N, 2)`` (steps/s, left and right); ``sending``
+        ``(N,)``: who broadcasts (dead robots never do); ``on_path`` ``(N,)``: who forages on the
+        path, for the metrics.
+
+        In one compiled call (``world/kernels.py: step_tick``): the board measures range and
+        bearing when the message crosses, at the poses the senders computed their content from;
+        receivers hear it at the next tick. The medium's draws (world/medium.py: loss, then range
+        and bearing noises) come first, then the slip of each wheel as U(-slip, slip), the
+        non-systematic odometry error: one random() call for the noises and the slips gives the
+        same numbers as three uniform() calls. Then the encoders (commanded steps) and the true
+        motion ((1 + u) times that, eq. 3-7), collisions (world/arena.py: resolve_collisions)
+        and the foraging metrics of the true area under each robot's middle ground sensor.
+        """
+        n = self._n
         cmd = np.asarray(wheel_speed_steps_s, float)
-        if cmd.shape != (self.n_robots, 2):
-            raise ValueError(f"wheel_speed_steps_s: expected shape ({self.n_robots}, 2), got {cmd.shape}")
-        # The board measures range and bearing when the message crosses, at the poses the
-        # senders computed their content from; receivers hear it at the next tick. The medium's
-        # draws (world/medium.py: deliver) come first, then the slip of each wheel, as
-        # U(-slip, slip), the non-systematic odometry error: one random() call for the range and
-        # bearing noises and the slips gives the same numbers as three uniform() calls.
-        sending = np.asarray(sending, bool) & self.alive
-        pairs = self._pairs[1] if self._pairs[0] is self.pose else None
-        crossed = crossing(self.pose, sending, cfg.medium, self.rng, pairs)
-        k, n = crossed.sender.shape[0], self.n_robots
-        u = self.rng.random(2 * k + 2 * n)
-        rn, bn = cfg.medium.range_noise_m, cfg.medium.bearing_noise_rad
-        slip = cfg.odometry.slip_fraction
-        # Then, in one kernel call: the boards' measurements, the encoders (commanded steps) and
-        # the true motion ((1 + u) times that, eq. 3-7), collisions (world/arena.py:
-        # resolve_collisions) and, for the metrics, the true area under each robot's (middle)
-        # ground sensor.
-        discs = arena_discs(self.arena)
-        ahead_m = GROUND_SENSOR_OFFSETS_M[1, 0]
-        pose, encoder, area, ok, range_m, bearing_rad = kernels.advance(
-            self.pose, cmd, self.alive, cfg.body.max_wheel_speed_steps_s, cfg.tick_s,
-            cfg.body.metres_per_step, -slip, slip - -slip, cfg.body.wheelbase_m, cfg.body.body_radius_m,
-            self.arena.width_m, self.arena.height_m, _COLLISION_ITERATIONS, ahead_m, discs,
-            crossed.dist_m, crossed.bearing_atan(), crossed.receiver_theta, -rn, rn - -rn, -bn, bn - -bn, u,
-            *((pairs[0], pairs[1], self._pair_cutoff_m) if pairs is not None else (_NO_PAIRS, _NO_PAIRS, 0.0)),
-        )
-        self._deliveries = Deliveries(crossed.sender, crossed.receiver, range_m, bearing_rad)
-        if not ok:  # a crowd: resolve_collisions' own (KD-tree) path
-            pose[:, :2] = resolve_collisions(
-                pose[:, :2], cfg.body.body_radius_m, self.arena, iterations=_COLLISION_ITERATIONS
-            )
-            area = kernels.sensor_areas(pose, ahead_m, discs)
+        if cmd.shape != (n, 2):
+            raise ValueError(f"wheel_speed_steps_s: expected shape ({n}, 2), got {cmd.shape}")
+        sending = np.asarray(sending, bool)
+        if sending.shape != (n,):
+            raise ValueError(f"sending must have shape ({n},), got {sending.shape}")
+        on_path = np.asarray(on_path, bool)
+        if on_path.shape != (n,):
+            raise ValueError(f"on_path must have shape ({n},), got {on_path.shape}")
+        pose = np.empty((n, 3))
+        encoder = np.empty((n, 2))
+        on_path_count = kernels.step_tick(*self._step_args(cmd, sending, on_path, pose, encoder))
+        self._finish_step(pose, encoder, self.tick + 1, on_path_count, on_path)
+
+    # The arguments of world/kernels.py: observe_tick and step_tick, in their order: also for the
+    # batch engine's compiled tick (deploy/batch.py), which calls them from there.
+
+    def _observe_args(self, pose, ir, ground, sender, receiver, range_m, bearing_rad) -> tuple:
+        """``observe_tick``'s arguments, sensing at ``pose`` into ``ir``, ``ground`` and the
+        deliveries' arrays (room for every message that crossed)."""
+        fn, state = self._rng_addresses()
+        return (pose, self._params, _COS_IR, _SIN_IR, GROUND_SENSOR_OFFSETS_M, self._discs, REFLECTANCE_BY_AREA,
+                fn, state, ir, ground, self._pair_ij, self._pair_f, self._pair_scratch, self._snapshot,
+                self._counts, self._crossed_ij, self._crossed_f, self.alive, sender, receiver, range_m,
+                bearing_rad, self._trig, self._trig_pose, self._noise_u)
+
+    def _grow_pairs(self) -> None:
+        """``observe_tick`` found more pairs than there is room for (and did nothing else)."""
+        self._pair_buffers(-2 * int(self._counts[_C_PAIRS]))
+
+    def _step_args(self, cmd, sending, on_path, pose, encoder) -> tuple:
+        """``step_tick``'s arguments for validated commands, into ``pose`` and ``encoder``."""
+        fn, state = self._rng_addresses()
+        first_visit, round_trips, stage, codes = self.metrics.kernel_state()
+        return (self.pose, cmd, self.alive, sending, on_path, self._params, self._discs, fn, state, self._math,
+                self._pair_ij, self._pair_f, self._snapshot, self._counts, pose, encoder, self._crossed_ij,
+                self._crossed_f, self.tick + 1, first_visit, round_trips, stage, codes, self._trig, self._trig_pose,
+                self._per_robot, self._work_i, self._work_f, self._step_u)
+
+    def _finish_step(self, pose, encoder, tick: int, on_path_count: int, on_path: np.ndarray) -> None:
+        """After ``step_tick`` (here or in the batch engine's compiled tick, deploy/batch.py):
+        the new state; ``on_path_count`` < 0 means a crowd, whose collisions are resolved here."""
         self.pose = pose
         self.encoder_steps = encoder
-        self.tick += 1
-        self.metrics.update(self.tick, area, on_path & self.alive)
+        self.tick = tick
+        if on_path_count >= 0:
+            self.metrics.counted(tick, on_path_count)
+        else:  # a crowd: resolve_collisions' own (KD-tree) path
+            pose[:, :2] = resolve_collisions(
+                pose[:, :2], self.config.body.body_radius_m, self.arena, iterations=_COLLISION_ITERATIONS
+            )
+            area = kernels.sensor_areas(pose, GROUND_SENSOR_OFFSETS_M[1, 0], self._discs)
+            self.metrics.update(tick, area, on_path & self.alive)
 
     def kill(self, index: int) -> None:
         """The robot's agent is gone: it stands still from now on."""

@@ -7,13 +7,19 @@ They are not a second implementation: the public model functions (``ir_proximity
 the world-server and the batch engine run exactly this code. Each kernel evaluates the same
 floating-point expressions, in the same order, as the numpy formulation it replaced (seed 000
 eq. 3-7 for the kinematics, §6.1 for sensors and medium), so a seeded run is bit-identical to
-the numpy one (``benchmarks/fingerprint.py``). Two things stay outside, in numpy, on purpose:
+the numpy one (``benchmarks/fingerprint.py``). Notes on exactness:
 
-- every random draw: the world's generator is called by the model function, in the documented
-  order, and the uniforms are passed in (same seed, same numbers);
+- random draws: the world's ``numpy.random.Generator`` is called in the documented order.
+  ``ForagingWorld``'s two per-tick kernels (:func:`observe_tick`, :func:`step_tick`) draw from it
+  themselves, through the ``next_double`` function of its bit generator
+  (:func:`generator_address`): the very function ``Generator.random`` calls for each number, so
+  the stream is numpy's and the generator's state advances as if numpy had drawn. The public
+  model functions draw in numpy and pass the uniforms in;
 - ``arctan2`` and ``exp``: numpy evaluates them with its own SIMD routines on this hardware,
-  which differ from the C library's in the last bit; ``sin``, ``cos``, ``hypot`` and ``sqrt``
-  agree bit for bit and are used here.
+  which differ from the C library's in the last bit; :func:`np_arctan2` calls those very
+  routines (:func:`numpy_math` finds them and checks them against numpy once per process), else
+  the C library's if it agrees with numpy here, else numpy itself from the kernel. ``sin``,
+  ``cos``, ``hypot`` and ``sqrt`` agree bit for bit and are used as they are.
 
 Neighbourhoods come from a spatial hash of square cells (side at least the query radius), built
 in O(N); the 3 x 3 cells around a robot hold every candidate (:func:`neighbour_pairs`).
@@ -23,25 +29,258 @@ contact to come from elsewhere, else they search again): the same pairs as a fre
 Collisions where a body touches three or more others go back to the KD-tree version of
 ``world/arena.py``, whose summation order defines the result.
 
+Per tick the world makes two kernel calls with preallocated outputs and its constants packed in
+one array (:func:`world_params`): numba checks the type of every argument of every call and
+boxes every array it returns, which at 100 robots costs as much as the work itself. The two
+share buffers: the neighbour pairs and the headings' cosines and sines found by one are reused
+by the other while the poses are still those they were found at (compared value by value, so a
+caller may change ``pose`` in place in between).
+
 Kernels are compiled on first use and cached on disk (``cache=True``, next to this file): the
 first run on a machine compiles for some 10-25 s, later processes load them in about a second.
 """
 
 from __future__ import annotations
 
+import ctypes
+import functools
+import importlib
 import math
 
 import numpy as np
-from numba import njit
+from llvmlite import ir as llvm_ir
+from numba import njit, objmode, types
+from numba.extending import intrinsic
 
 _PI = math.pi
 _TWO_PI = 2.0 * math.pi
 
 
+# ------------------------------------------------------------------- numpy's numbers, in kernels
+# The world's and the agents' kernels each carry this block (world/kernels.py, agents/kernels.py):
+# the two share no code but the protocol. tests/test_batch_kernels.py holds both to numpy.
+
+#: How kernels get numpy's float64 ``exp`` and ``arctan2`` bit for bit (:func:`numpy_math`):
+#: numpy's own SIMD routines (SVML, on x86-64 with AVX-512), the C library's, or numpy itself.
+MATH_SVML, MATH_LIBM, MATH_NUMPY = 0, 1, 2
+#: Slots of the ``math_fns`` array of :func:`numpy_math`: the mode, then the SVML entry points.
+M_MODE, M_EXP, M_ATAN2 = 0, 1, 2
+
+
+def generator_address(rng: np.random.Generator) -> tuple[int, int]:
+    """``(next_double, state)`` addresses of a generator's bit generator, for kernels that draw
+    from it: the function ``Generator.random`` calls for each number, so they draw the same
+    stream and advance the generator as numpy would (numba's own ``Generator`` support does the
+    same but unboxes the generator for some 7 us per call). Valid while ``rng`` lives; not for
+    use from two threads at once (numpy's own calls take the bit generator's lock; kernels do
+    not)."""
+    if not isinstance(rng, np.random.Generator):
+        raise TypeError(f"rng: expected a numpy.random.Generator, got {type(rng).__name__}")
+    c = rng.bit_generator.ctypes
+    return ctypes.cast(c.next_double, ctypes.c_void_p).value, int(c.state_address)
+
+
+@intrinsic
+def _call_next_double(typingctx, fn_address, state_address):
+    """``next_double(state)`` of a numpy bit generator (addresses of :func:`generator_address`)."""
+    sig = types.float64(types.intp, types.intp)
+
+    def codegen(context, builder, signature, args):
+        byte_ptr = llvm_ir.IntType(8).as_pointer()
+        fn = builder.inttoptr(args[0], llvm_ir.FunctionType(llvm_ir.DoubleType(), [byte_ptr]).as_pointer())
+        return builder.call(fn, [builder.inttoptr(args[1], byte_ptr)])
+
+    return sig, codegen
+
+
+_F64X8 = llvm_ir.VectorType(llvm_ir.DoubleType(), 8)
+
+
+@intrinsic
+def _svml_exp_lane0(typingctx, fn_address, x):
+    """numpy's SVML ``exp`` (one ``__m512d`` in, one out) of ``x`` in lane 0, zeros elsewhere:
+    how numpy evaluates a lone element."""
+    sig = types.float64(types.intp, types.float64)
+
+    def codegen(context, builder, signature, args):
+        fn = builder.inttoptr(args[0], llvm_ir.FunctionType(_F64X8, [_F64X8]).as_pointer())
+        lane0 = llvm_ir.Constant(llvm_ir.IntType(32), 0)
+        v = builder.insert_element(llvm_ir.Constant(_F64X8, [0.0] * 8), args[1], lane0)
+        return builder.extract_element(builder.call(fn, [v]), lane0)
+
+    return sig, codegen
+
+
+@intrinsic
+def _svml_atan2_x8(typingctx, fn_address, y_address, x_address, out_address):
+    """numpy's SVML ``atan2`` of 8 consecutive float64 at ``y_address``, ``x_address``, to
+    ``out_address``."""
+    sig = types.void(types.intp, types.intp, types.intp, types.intp)
+
+    def codegen(context, builder, signature, args):
+        fn = builder.inttoptr(args[0], llvm_ir.FunctionType(_F64X8, [_F64X8, _F64X8]).as_pointer())
+        ptr = _F64X8.as_pointer()
+        y = builder.load(builder.inttoptr(args[1], ptr), align=8)
+        x = builder.load(builder.inttoptr(args[2], ptr), align=8)
+        builder.store(builder.call(fn, [y, x]), builder.inttoptr(args[3], ptr), align=8)
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
+@njit(cache=True, error_model="numpy")
+def np_exp(x, math_fns):
+    """numpy's ``exp`` of one float64, bit for bit (``math_fns`` of :func:`numpy_math`)."""
+    mode = math_fns[M_MODE]
+    if mode == MATH_SVML:
+        return _svml_exp_lane0(math_fns[M_EXP], x)
+    if mode == MATH_LIBM:
+        return math.exp(x)
+    with objmode(out="float64"):
+        out = float(np.exp(np.array([x]))[0])
+    return out
+
+
+@njit(cache=True, error_model="numpy")
+def np_arctan2(y, x, out, math_fns):
+    """``out[:] = numpy.arctan2(y, x)`` bit for bit, for 1-D float64 arrays of one length (numpy's
+    SIMD loop runs 8 lanes at a time and pads the last vector with zeros: so does this)."""
+    n = y.shape[0]
+    mode = math_fns[M_MODE]
+    if mode == MATH_SVML:
+        if y.strides[0] == 8 and x.strides[0] == 8 and out.strides[0] == 8:
+            _svml_atan2_run(math_fns[M_ATAN2], y.ctypes.data, x.ctypes.data, out.ctypes.data, n)
+        else:
+            yc, xc, oc = np.ascontiguousarray(y), np.ascontiguousarray(x), np.empty(n)
+            _svml_atan2_run(math_fns[M_ATAN2], yc.ctypes.data, xc.ctypes.data, oc.ctypes.data, n)
+            out[:] = oc
+    elif mode == MATH_LIBM:
+        for q in range(n):
+            out[q] = math.atan2(y[q], x[q])
+    else:
+        with objmode():
+            np.arctan2(y, x, out=out)
+
+
+@njit(cache=True, error_model="numpy")
+def _svml_atan2_run(fn, y_address, x_address, out_address, n):
+    """SVML ``atan2`` of ``n`` contiguous float64, 8 at a time, the last vector zero-padded."""
+    q = 0
+    while q + 8 <= n:
+        _svml_atan2_x8(fn, y_address + 8 * q, x_address + 8 * q, out_address + 8 * q)
+        q += 8
+    if q < n:
+        tail = np.zeros(24)
+        t = tail.ctypes.data
+        for k in range(n - q):
+            tail[k] = _load_f64(y_address + 8 * (q + k))
+            tail[8 + k] = _load_f64(x_address + 8 * (q + k))
+        _svml_atan2_x8(fn, t, t + 64, t + 128)
+        for k in range(n - q):
+            _store_f64(out_address + 8 * (q + k), tail[16 + k])
+
+
+@intrinsic
+def _load_f64(typingctx, address):
+    sig = types.float64(types.intp)
+
+    def codegen(context, builder, signature, args):
+        return builder.load(builder.inttoptr(args[0], llvm_ir.DoubleType().as_pointer()), align=8)
+
+    return sig, codegen
+
+
+@intrinsic
+def _store_f64(typingctx, address, value):
+    sig = types.void(types.intp, types.float64)
+
+    def codegen(context, builder, signature, args):
+        builder.store(args[1], builder.inttoptr(args[0], llvm_ir.DoubleType().as_pointer()), align=8)
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
+@njit(cache=True, error_model="numpy")
+def _probe_math(x, y, z, math_fns):
+    e = np.empty_like(x)
+    for q in range(x.shape[0]):
+        e[q] = np_exp(x[q], math_fns)
+    a = np.empty_like(y)
+    np_arctan2(y, z, a, math_fns)
+    return e, a
+
+
+def _svml_entry_points() -> tuple[int, int] | None:
+    """numpy's SVML ``exp`` and ``atan2`` (``__m512d`` in zmm registers), if numpy has them and
+    both numpy and numba's code generator may use AVX-512 here."""
+    try:
+        import llvmlite.binding as llvm
+        from numba.core import config
+
+        umath = importlib.import_module("numpy._core._multiarray_umath")
+        if not umath.__cpu_features__.get("AVX512_SKX"):
+            return None
+        if config.CPU_NAME not in (None, "host") or config.CPU_FEATURES is not None:
+            return None
+        if not llvm.get_host_cpu_features().get("avx512f"):
+            return None
+        lib = ctypes.CDLL(umath.__file__)
+        return (ctypes.cast(lib.__svml_exp8_ha, ctypes.c_void_p).value,
+                ctypes.cast(lib.__svml_atan28_ha, ctypes.c_void_p).value)
+    except (ImportError, AttributeError, OSError):
+        return None
+
+
+@functools.cache
+def _numpy_math() -> tuple[int, int, int]:
+    rng = np.random.default_rng(20261122)
+    x = np.concatenate([rng.uniform(-500.0, 500.0, 4096), rng.uniform(-3.0, 3.0, 4096),
+                        [0.0, -0.0, 1e-300, -1e-300, 1.0, -1.0, 500.0, -500.0]])
+    y, z = rng.normal(size=(2, 8195)) * np.repeat([1.0, 1e-3, 1e3], [4096, 2048, 2051])
+    y[:4], z[:4] = [0.0, -0.0, 1.0, -1.0], [-0.0, 0.0, 0.0, -0.0]
+    expected = (np.exp(x), np.arctan2(y, z))
+    candidates = [(MATH_LIBM, 0, 0)]
+    svml = _svml_entry_points()
+    if svml is not None:
+        candidates.insert(0, (MATH_SVML, *svml))
+    for mode in candidates:
+        got = _probe_math(x, y, z, np.array(mode, np.int64))
+        if all(np.array_equal(g.view(np.int64), e.view(np.int64)) for g, e in zip(got, expected)):
+            return mode
+    return (MATH_NUMPY, 0, 0)
+
+
+def numpy_math() -> np.ndarray:
+    """``math_fns`` for :func:`np_exp` and :func:`np_arctan2`: the first of numpy's SVML routines
+    (what numpy 2 calls on x86-64 with AVX-512), then the C library's, whose results match numpy's
+    on a probe of some 8,000 arguments here; else numpy itself, called from the kernel (about a
+    microsecond a call). Probed once per process."""
+    return np.array(_numpy_math(), np.int64)
+
+
+# ------------------------------------------------------------ end of numpy's numbers, in kernels
+
+
+@njit(cache=True)
+def fill_random(out, fn_address, state_address):
+    """``out[:] = rng.random(out.size)`` (flat ``out``), from the addresses of
+    :func:`generator_address`."""
+    for q in range(out.shape[0]):
+        out[q] = _call_next_double(fn_address, state_address)
+
+
 @njit(cache=True, inline="always", error_model="numpy")
 def wrap(angle_rad):
-    """``(a + pi) % (2 pi) - pi``: Python/numpy float modulo semantics, as ``wrap_angle``."""
-    return (angle_rad + _PI) % _TWO_PI - _PI
+    """``(a + pi) % (2 pi) - pi``: Python/numpy float modulo semantics, as ``wrap_angle``. For
+    ``x = a + pi`` in ``(-2 pi, 2 pi)`` the modulo is ``x`` or ``x + 2 pi`` exactly (``fmod``
+    returns ``x``; a negative one is moved by the divisor), which skips the call to ``fmod``."""
+    x = angle_rad + _PI
+    if 0.0 <= x < _TWO_PI:
+        return x - _PI  # (-0.0 gives -pi here, +0.0 % 2 pi - pi there: the same)
+    if -_TWO_PI < x < 0.0:
+        return (x + _TWO_PI) - _PI
+    return x % _TWO_PI - _PI
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -109,49 +348,75 @@ def neighbour_pairs(x_m, y_m, cutoff_m, x0_m, y0_m, width_m, height_m):
     """Unordered pairs ``i < j`` of points at most about ``cutoff_m`` apart (a superset: the
     squared distance is compared with ``cutoff_m**2`` enlarged by 1e-9, so that every pair whose
     ``hypot`` is within ``cutoff_m`` is in): ``(i, j, dx, dy, d2)`` with ``dx = x[j] - x[i]``,
-    ``d2 = dx * dx + dy * dy``. Callers apply their own exact test. Grid over
-    ``[x0, x0 + width] x [y0, y0 + height]`` (:func:`build_grid`)."""
+    ``d2 = dx * dx + dy * dy``, in order of ``i``. Callers apply their own exact test, and do
+    not depend on the order of the pairs (a minimum, a sort, sums of two). Grid over ``[x0, x0 +
+    width] x [y0, y0 + height]`` (:func:`build_grid`)."""
+    size = 8 * x_m.shape[0] + 16
+    while True:
+        pair_ij = np.empty((2, size), np.int64)
+        pair_f = np.empty((3, size))
+        m = neighbour_pairs_into(x_m, y_m, cutoff_m, x0_m, y0_m, width_m, height_m, pair_ij, pair_f,
+                                 np.empty((2, size), np.int64))
+        if m >= 0:
+            return (pair_ij[0, :m].copy(), pair_ij[1, :m].copy(), pair_f[0, :m].copy(), pair_f[1, :m].copy(),
+                    pair_f[2, :m].copy())
+        size = -m
+
+
+@njit(cache=True, error_model="numpy")
+def neighbour_pairs_into(x_m, y_m, cutoff_m, x0_m, y0_m, width_m, height_m, pair_ij, pair_f, scratch):
+    """:func:`neighbour_pairs` into ``pair_ij`` ``(2, capacity)`` (i, j) and ``pair_f``
+    ``(3, capacity)`` (dx, dy, d2), with ``scratch`` ``(2, capacity)``: returns how many, or minus
+    that number if more than ``capacity`` (then the outputs are not valid)."""
     n = x_m.shape[0]
-    size = 8 * n + 16
-    pi = np.empty(size, np.int64)
-    pj = np.empty(size, np.int64)
+    size = pair_ij.shape[1]
     m = 0
     if n >= 2:
         near2 = cutoff_m * cutoff_m * (1.0 + 1e-9)
         cx, cy, start, items, mask = build_grid(x_m, y_m, cutoff_m, x0_m, y0_m, width_m, height_m)
         for i in range(n):
-            for cell in range(9):  # the 3 x 3 cells around the point
-                gx, gy = cx[i] - 1 + cell % 3, cy[i] - 1 + cell // 3
+            # Half the 3 x 3 cells around the point: its own (partners j > i), then (+1, 0),
+            # (-1, +1), (0, +1), (+1, +1); the point's other neighbours find it from theirs.
+            gxi, gyi = cx[i], cy[i]
+            for cell in range(5):
+                gx = gxi + (0 if cell == 0 else (1 if cell == 1 else cell - 3))
+                gy = gyi + (0 if cell <= 1 else 1)
                 bk = cell_bucket(gx, gy, mask)
                 for q in range(start[bk], start[bk + 1]):
                     j = items[q]
-                    if j <= i or cx[j] != gx or cy[j] != gy:
-                        continue  # each pair once; skip other cells sharing the bucket
-                    dx = x_m[j] - x_m[i]
-                    dy = y_m[j] - y_m[i]
+                    if cx[j] != gx or cy[j] != gy or (cell == 0 and j <= i):
+                        continue  # skip other cells sharing the bucket; each pair once
+                    a, b = (i, j) if i < j else (j, i)
+                    dx = x_m[b] - x_m[a]
+                    dy = y_m[b] - y_m[a]
                     if dx * dx + dy * dy > near2:
                         continue
-                    if m == size:
-                        size *= 2
-                        grown = np.empty(size, np.int64)
-                        grown[:m] = pi[:m]
-                        pi = grown
-                        grown = np.empty(size, np.int64)
-                        grown[:m] = pj[:m]
-                        pj = grown
-                    pi[m] = i
-                    pj[m] = j
+                    if m < size:
+                        scratch[0, m] = a
+                        scratch[1, m] = b
                     m += 1
-    pi = pi[:m].copy()
-    pj = pj[:m].copy()
-    pdx = np.empty(m)
-    pdy = np.empty(m)
-    pd2 = np.empty(m)
+    if m > size:
+        return -m
+    # In order of i (a counting sort; j as found): the consumers' scattered accesses then run
+    # through memory in order, which counts for thousands of robots.
+    start_i = np.zeros(n + 1, np.int64)
     for q in range(m):
-        pdx[q] = x_m[pj[q]] - x_m[pi[q]]
-        pdy[q] = y_m[pj[q]] - y_m[pi[q]]
-        pd2[q] = pdx[q] * pdx[q] + pdy[q] * pdy[q]
-    return pi, pj, pdx, pdy, pd2
+        start_i[scratch[0, q] + 1] += 1
+    for i in range(n):
+        start_i[i + 1] += start_i[i]
+    for q in range(m):
+        a = scratch[0, q]
+        c = start_i[a]
+        pair_ij[0, c] = a
+        pair_ij[1, c] = scratch[1, q]
+        start_i[a] = c + 1
+    for q in range(m):
+        dx = x_m[pair_ij[1, q]] - x_m[pair_ij[0, q]]
+        dy = y_m[pair_ij[1, q]] - y_m[pair_ij[0, q]]
+        pair_f[0, q] = dx
+        pair_f[1, q] = dy
+        pair_f[2, q] = dx * dx + dy * dy
+    return m
 
 
 # ------------------------------------------------------------------------------------ sensors
@@ -164,8 +429,10 @@ def ir_readings(pose, r_m, range_m, width_m, height_m, cos_a, sin_a, noise_u, no
     (see :func:`uniform`)."""
     cos_h, sin_h = heading_cos_sin(pose)
     pairs = neighbour_pairs(pose[:, 0], pose[:, 1], 2.0 * r_m + range_m, 0.0, 0.0, width_m, height_m)
-    return _ir_readings(pose, cos_h, sin_h, r_m, range_m, width_m, height_m, cos_a, sin_a, noise_u,
-                        noise_lo, noise_span, *pairs)
+    out = np.empty((pose.shape[0], cos_a.shape[0]))
+    _ir_readings(pose, cos_h, sin_h, r_m, range_m, width_m, height_m, cos_a, sin_a, noise_u, noise_lo, noise_span,
+                 pairs[0], pairs[1], pairs[2], pairs[3], pairs[4], pairs[0].shape[0], out)
+    return out
 
 
 @njit(cache=True, error_model="numpy")
@@ -203,10 +470,12 @@ def _ray_to_body(dist, a, dx, dy, d2, cos_t, sin_t, r_m, cos_a, sin_a):
 
 @njit(cache=True, error_model="numpy")
 def _ir_readings(pose, cos_h, sin_h, r_m, range_m, width_m, height_m, cos_a, sin_a, noise_u, noise_lo, noise_span,
-                 pair_i, pair_j, pair_dx, pair_dy, pair_d2):
+                 pair_i, pair_j, pair_dx, pair_dy, pair_d2, n_pairs, out):
+    """:func:`ir_readings` into ``out`` ``(N, S)``, from the first ``n_pairs`` neighbour pairs."""
     n = pose.shape[0]
     n_s = cos_a.shape[0]
-    dist = np.full((n, n_s), np.inf)
+    dist = out  # distances first, turned into readings in place at the end
+    dist[:] = np.inf
     reach_m = r_m + range_m
     x_hi = width_m - reach_m
     y_hi = height_m - reach_m
@@ -231,7 +500,7 @@ def _ir_readings(pose, cos_h, sin_h, r_m, range_m, width_m, height_m, cos_a, sin
     # Robot pairs, each seen from both ends: D = centre_b - centre_a is (dx, dy) from i and
     # exactly (-dx, -dy) from j, with the same squared length.
     cut2 = (2.0 * r_m + range_m) * (2.0 * r_m + range_m)
-    for p in range(pair_i.shape[0]):
+    for p in range(n_pairs):
         d2 = pair_d2[p]
         if d2 > cut2:
             continue
@@ -239,12 +508,10 @@ def _ir_readings(pose, cos_h, sin_h, r_m, range_m, width_m, height_m, cos_a, sin
         _ray_to_body(dist, i, pair_dx[p], pair_dy[p], d2, cos_h[i], sin_h[i], r_m, cos_a, sin_a)
         _ray_to_body(dist, j, -pair_dx[p], -pair_dy[p], d2, cos_h[j], sin_h[j], r_m, cos_a, sin_a)
     scale = -1.0 / range_m
-    out = np.empty((n, n_s))
     for a in range(n):
         for k in range(n_s):
             v = _clip(dist[a, k] * scale + 1.0, 0.0, 1.0)
             out[a, k] = _clip(v * (uniform(noise_lo, noise_span, noise_u[a, k]) + 1.0), 0.0, 1.0)
-    return out
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -267,13 +534,15 @@ def ground_readings(pose, offsets, discs, reflectance, noise_u, noise_lo, noise_
     :func:`ir_readings`); ``discs`` = (nest x, y, r, prey x, y, r), ``reflectance`` indexed by
     area code."""
     cos_h, sin_h = heading_cos_sin(pose)
-    return _ground_readings(pose, cos_h, sin_h, offsets, discs, reflectance, noise_u, noise_lo, noise_span)
+    out = np.empty((pose.shape[0], offsets.shape[0]))
+    _ground_readings(pose, cos_h, sin_h, offsets, discs, reflectance, noise_u, noise_lo, noise_span, out)
+    return out
 
 
 @njit(cache=True, error_model="numpy")
-def _ground_readings(pose, cos_h, sin_h, offsets, discs, reflectance, noise_u, noise_lo, noise_span):
+def _ground_readings(pose, cos_h, sin_h, offsets, discs, reflectance, noise_u, noise_lo, noise_span, out):
+    """:func:`ground_readings` into ``out`` ``(N, G)``."""
     n, n_g = pose.shape[0], offsets.shape[0]
-    out = np.empty((n, n_g))
     for i in range(n):
         c, s = cos_h[i], sin_h[i]
         for g in range(n_g):
@@ -281,7 +550,6 @@ def _ground_readings(pose, cos_h, sin_h, offsets, discs, reflectance, noise_u, n
             py = pose[i, 1] + s * offsets[g, 0] + c * offsets[g, 1]
             code = _area_code(px, py, discs[0], discs[1], discs[2], discs[3], discs[4], discs[5])
             out[i, g] = reflectance[code] * (1.0 + uniform(noise_lo, noise_span, noise_u[i, g]))
-    return out
 
 
 @njit(cache=True, error_model="numpy")
@@ -316,12 +584,28 @@ def rab_candidates(pose, sending, range_m):
 def rab_candidates_from_pairs(pose, sending, range_m, pair_i, pair_j, pair_dx, pair_dy, pair_d2):
     """:func:`rab_candidates` from :func:`neighbour_pairs` (any cutoff of at least ``range_m``):
     each pair within ``hypot <= range_m`` gives a message each way its sender sends."""
+    n_pairs, n = pair_i.shape[0], pose.shape[0]
+    work_i = np.empty((3, max(2 * n_pairs, 1)), np.int64)
+    work_f = np.empty((4, max(2 * n_pairs, 1)))
+    m = rab_candidates_into(pose, sending, range_m, pair_i, pair_j, pair_dx, pair_dy, pair_d2, n_pairs,
+                            np.empty((2, n + 1), np.int64), work_i, work_f)
+    return (work_i[1, :m].copy(), work_i[2, :m].copy(), work_f[1, :m].copy(), work_f[2, :m].copy(),
+            work_f[3, :m].copy())
+
+
+@njit(cache=True, error_model="numpy")
+def rab_candidates_into(pose, sending, range_m, pair_i, pair_j, pair_dx, pair_dy, pair_d2, n_pairs, per_robot,
+                        work_i, work_f):
+    """:func:`rab_candidates_from_pairs` of the first ``n_pairs`` pairs, into work arrays of at
+    least ``2 n_pairs`` columns: the candidates' sender and receiver go to ``work_i[1]``,
+    ``work_i[2]``, their distance and ``rel`` to ``work_f[1:4]`` (rows 0 are scratch, as is
+    ``per_robot`` ``(2, N + 1)``). Returns how many."""
     n = pose.shape[0]
-    n_pairs = pair_i.shape[0]
     near2 = range_m * range_m * (1.0 + 1e-9)  # cheap pre-filter; hypot decides
-    keep = np.empty(n_pairs, np.int64)
-    dist_of = np.empty(n_pairs)
-    count = np.zeros(n + 1, np.int64)  # messages per receiver, then run starts
+    keep = work_i[0]
+    dist_of = work_f[0]
+    count = per_robot[0]  # messages per receiver, then run starts
+    count[:] = 0
     n_keep = 0
     for p in range(n_pairs):
         if pair_d2[p] > near2:
@@ -342,12 +626,10 @@ def rab_candidates_from_pairs(pose, sending, range_m, pair_i, pair_j, pair_dx, p
     for r in range(n):
         count[r + 1] += count[r]
     m = count[n]
-    sender = np.empty(m, np.int64)
-    receiver = np.empty(m, np.int64)
-    dist = np.empty(m)
-    rel_x = np.empty(m)
-    rel_y = np.empty(m)
-    fill = count[:n].copy()
+    sender, receiver = work_i[1], work_i[2]
+    dist, rel_x, rel_y = work_f[1], work_f[2], work_f[3]
+    fill = per_robot[1]
+    fill[:n] = count[:n]
     for q in range(n_keep):
         p = keep[q]
         i, j = pair_i[p], pair_j[p]
@@ -369,7 +651,7 @@ def rab_candidates_from_pairs(pose, sending, range_m, pair_i, pair_j, pair_dx, p
                 rel_x[b - 1], rel_x[b] = rel_x[b], rel_x[b - 1]
                 rel_y[b - 1], rel_y[b] = rel_y[b], rel_y[b - 1]
                 b -= 1
-    return sender, receiver, dist, rel_x, rel_y
+    return m
 
 
 @njit(cache=True, error_model="numpy")
@@ -378,7 +660,17 @@ def rab_select(sender, receiver, dist, rel_x, rel_y, theta, loss_u, near_m, rang
     (per receiver the ``cap`` nearest, ties by sender), in candidate order: ``(sender, receiver,
     dist, rel_x, rel_y, receiver_theta)``, ``theta`` being every robot's heading."""
     m = receiver.shape[0]
-    survive = np.empty(m, np.int64)
+    keep = np.empty((2, m), np.int64)
+    kept = rab_select_into(receiver, dist, loss_u, m, near_m, range_m, loss_near, loss_far, cap, keep)
+    index = keep[1, :kept]
+    return sender[index], receiver[index], dist[index], rel_x[index], rel_y[index], theta[receiver[index]]
+
+
+@njit(cache=True, error_model="numpy")
+def rab_select_into(receiver, dist, loss_u, m, near_m, range_m, loss_near, loss_far, cap, keep):
+    """:func:`rab_select` of the first ``m`` candidates: their indices, in order, to ``keep[1]``
+    (``keep[0]`` is scratch); returns how many."""
+    survive = keep[0]
     k = 0
     span = range_m - near_m
     gain = loss_far - loss_near
@@ -387,7 +679,7 @@ def rab_select(sender, receiver, dist, rel_x, rel_y, theta, loss_u, near_m, rang
         if loss_u[q] >= loss_near + gain * t:
             survive[k] = q
             k += 1
-    keep = np.empty(k, np.int64)
+    out = keep[1]
     kept = 0
     lo = 0
     while lo < k:
@@ -396,7 +688,7 @@ def rab_select(sender, receiver, dist, rel_x, rel_y, theta, loss_u, near_m, rang
             hi += 1
         if hi - lo <= cap:
             for q in range(lo, hi):
-                keep[kept] = survive[q]
+                out[kept] = survive[q]
                 kept += 1
         else:
             # rank of each survivor by (distance, position in the run); keep rank < cap
@@ -408,24 +700,10 @@ def rab_select(sender, receiver, dist, rel_x, rel_y, theta, loss_u, near_m, rang
                     if do < dq or (do == dq and o < q):
                         rank += 1
                 if rank < cap:
-                    keep[kept] = survive[q]
+                    out[kept] = survive[q]
                     kept += 1
         lo = hi
-    out_s = np.empty(kept, np.int64)
-    out_r = np.empty(kept, np.int64)
-    out_d = np.empty(kept)
-    out_x = np.empty(kept)
-    out_y = np.empty(kept)
-    out_t = np.empty(kept)
-    for q in range(kept):
-        c = keep[q]
-        out_s[q] = sender[c]
-        out_r[q] = receiver[c]
-        out_d[q] = dist[c]
-        out_x[q] = rel_x[c]
-        out_y[q] = rel_y[c]
-        out_t[q] = theta[receiver[c]]
-    return out_s, out_r, out_d, out_x, out_y, out_t
+    return kept
 
 
 @njit(cache=True, error_model="numpy")
@@ -446,15 +724,15 @@ def rab_measure(dist, noise_u, range_lo, range_span, bearing_atan, receiver_thet
 
 
 @njit(cache=True, error_model="numpy")
-def move_bodies(pose, cmd, alive, vmax, tick_s, metres_per_step, slip_u, slip_lo, slip_span, wheelbase_m):
-    """Wheel commands to encoder counts and true poses (``ForagingWorld.step``; seed 000 eq. 3-7).
+def move_bodies(pose, cmd, alive, vmax, tick_s, metres_per_step, slip_u, slip_lo, slip_span, wheelbase_m, out,
+                encoder):
+    """Wheel commands to encoder counts ``encoder`` ``(N, 2)`` and true poses ``out`` ``(N, 3)``
+    (``ForagingWorld.step``; seed 000 eq. 3-7).
 
     The slip factor of each wheel is ``U(-slip, slip)`` from the ``(N, 2)`` uniforms ``slip_u``
-    (see :func:`uniform`). Returns ``(pose, encoder)``.
+    (see :func:`uniform`).
     """
     n = pose.shape[0]
-    out = np.empty_like(pose)
-    encoder = np.empty((n, 2))
     for i in range(n):
         left = _clip(cmd[i, 0], -vmax, vmax) * tick_s if alive[i] else 0.0
         right = _clip(cmd[i, 1], -vmax, vmax) * tick_s if alive[i] else 0.0
@@ -468,7 +746,6 @@ def move_bodies(pose, cmd, alive, vmax, tick_s, metres_per_step, slip_u, slip_lo
         out[i, 0] = pose[i, 0] + d_rho * math.cos(zeta)
         out[i, 1] = pose[i, 1] + d_rho * math.sin(zeta)
         out[i, 2] = wrap(pose[i, 2] + d_theta)
-    return out, encoder
 
 
 @njit(cache=True, error_model="numpy")
@@ -502,11 +779,13 @@ def separate_bodies_near(pos, radius_m, width_m, height_m, iterations, ref_pos, 
         if n >= 2:
             acc[:] = 0.0
             count[:] = 0
-            moved_m = 0.0
+            moved2 = 0.0  # the largest squared move: the test has a 1e-9 margin for its rounding
             if pair_cutoff_m > 0.0:
                 for i in range(n):
-                    moved_m = max(moved_m, math.hypot(pos[i, 0] - ref_pos[i, 0], pos[i, 1] - ref_pos[i, 1]))
-            if pair_cutoff_m > 0.0 and min_gap + 2.0 * moved_m + 1e-9 <= pair_cutoff_m:
+                    dx = pos[i, 0] - ref_pos[i, 0]
+                    dy = pos[i, 1] - ref_pos[i, 1]
+                    moved2 = max(moved2, dx * dx + dy * dy)
+            if pair_cutoff_m > 0.0 and min_gap + 2.0 * math.sqrt(moved2) + 1e-9 <= pair_cutoff_m:
                 for p in range(pair_i.shape[0]):
                     any_pair |= _push_pair(pos, pair_i[p], pair_j[p], min_gap, near2, acc, count)
             else:
@@ -575,11 +854,17 @@ def _push_pair(pos, i, j, min_gap, near2, acc, count):
 @njit(cache=True, error_model="numpy")
 def sensor_areas(pose, ahead_m, discs):
     """True area code under each robot's middle ground sensor (``ground_sensor_point``)."""
+    cos_h, sin_h = heading_cos_sin(pose)
+    return _sensor_areas(pose, cos_h, sin_h, ahead_m, discs)
+
+
+@njit(cache=True, error_model="numpy")
+def _sensor_areas(pose, cos_h, sin_h, ahead_m, discs):
     n = pose.shape[0]
     out = np.empty(n, np.int8)
     for i in range(n):
-        px = pose[i, 0] + ahead_m * math.cos(pose[i, 2])
-        py = pose[i, 1] + ahead_m * math.sin(pose[i, 2])
+        px = pose[i, 0] + ahead_m * cos_h[i]
+        py = pose[i, 1] + ahead_m * sin_h[i]
         out[i] = _area_code(px, py, discs[0], discs[1], discs[2], discs[3], discs[4], discs[5])
     return out
 
@@ -602,49 +887,202 @@ def update_round_trips(tick, area, first_visit_tick, round_trips, stage, nest, p
                 stage[i] = to_nest
 
 
-# ----------------------------------------------------------------------- one world tick, fused
+
+
+# ------------------------------------------------------------------ one world tick, two calls
+
+#: Slots of the world's constants in :func:`world_params`.
+(P_BODY_RADIUS, P_IR_RANGE, P_WIDTH, P_HEIGHT, P_IR_LO, P_IR_SPAN, P_GROUND_LO, P_GROUND_SPAN, P_PAIR_CUTOFF,
+ P_RAB_RANGE, P_RANGE_LO, P_RANGE_SPAN, P_BEARING_LO, P_BEARING_SPAN, P_NEAR, P_LOSS_NEAR, P_LOSS_FAR,
+ P_MAX_RECEIVED, P_VMAX, P_TICK, P_METRES_PER_STEP, P_SLIP_LO, P_SLIP_SPAN, P_WHEELBASE, P_ITERATIONS,
+ P_AHEAD, N_PARAMS) = range(27)
+#: Slots of the counters that :func:`observe_tick` and :func:`step_tick` share with their caller.
+C_PAIRS, C_CROSSED, C_DELIVERED, C_SEPARATED, C_ON_PATH, N_COUNTS = range(6)
+
+
+def world_params(*, body_radius_m, ir_range_m, width_m, height_m, ir_noise, ground_noise, pair_cutoff_m,
+                 rab_range_m, range_noise_m, bearing_noise_rad, near_m, loss_near, loss_far, max_received,
+                 vmax, tick_s, metres_per_step, slip_fraction, wheelbase_m, iterations, ahead_m) -> np.ndarray:
+    """The world's constants in one array (slots ``P_*``). Each noise ``f`` becomes the ``low``
+    and ``span`` of ``U(-f, f)`` as :func:`uniform` wants them: ``-f`` and ``f - -f``."""
+    p = np.zeros(N_PARAMS)
+    for slot, value in (
+        (P_BODY_RADIUS, body_radius_m), (P_IR_RANGE, ir_range_m), (P_WIDTH, width_m), (P_HEIGHT, height_m),
+        (P_IR_LO, -ir_noise), (P_IR_SPAN, ir_noise - -ir_noise),
+        (P_GROUND_LO, -ground_noise), (P_GROUND_SPAN, ground_noise - -ground_noise),
+        (P_PAIR_CUTOFF, max(pair_cutoff_m, 2.0 * body_radius_m + ir_range_m)),
+        (P_RAB_RANGE, rab_range_m), (P_RANGE_LO, -range_noise_m), (P_RANGE_SPAN, range_noise_m - -range_noise_m),
+        (P_BEARING_LO, -bearing_noise_rad), (P_BEARING_SPAN, bearing_noise_rad - -bearing_noise_rad),
+        (P_NEAR, near_m), (P_LOSS_NEAR, loss_near), (P_LOSS_FAR, loss_far), (P_MAX_RECEIVED, max_received),
+        (P_VMAX, vmax), (P_TICK, tick_s), (P_METRES_PER_STEP, metres_per_step),
+        (P_SLIP_LO, -slip_fraction), (P_SLIP_SPAN, slip_fraction - -slip_fraction), (P_WHEELBASE, wheelbase_m),
+        (P_ITERATIONS, iterations), (P_AHEAD, ahead_m),
+    ):
+        p[slot] = float(value)
+    return p
 
 
 @njit(cache=True, error_model="numpy")
-def sense(pose, r_m, ir_range_m, width_m, height_m, cos_a, sin_a, ir_lo, ir_span, offsets, discs, reflectance,
-          ground_lo, ground_span, u, pair_cutoff_m):
-    """:func:`ir_readings` and :func:`ground_readings` in one call (``ForagingWorld.observe``);
-    ``u``: the IR noise uniforms ``(N, S)`` then the ground noise uniforms ``(N, G)``, flat.
+def observe_tick(pose, params, cos_a, sin_a, offsets, discs, reflectance, rng_fn, rng_state, ir, ground, pair_ij,
+                 pair_f, pair_scratch, snapshot, counts, crossed_ij, crossed_f, alive, d_sender, d_receiver, d_range,
+                 d_bearing, trig, trig_pose, noise_u):
+    """``ForagingWorld.observe`` in one call: the IR and ground readings of ``world/sensors.py``
+    (:func:`ir_readings`, :func:`ground_readings`) into ``ir`` ``(N, S)`` and ``ground`` ``(N, G)``,
+    their noises drawn from the world's generator (``rng_fn``, ``rng_state``: see
+    :func:`generator_address`) as one ``random(N S + N G)``: the IR noises, then the ground ones.
 
-    Returns ``(ir, ground, pairs)``: :func:`neighbour_pairs` within ``pair_cutoff_m`` (at least
-    the IR reach ``2 r + range``), which the medium reuses at the same poses."""
-    n, n_s, n_g = pose.shape[0], cos_a.shape[0], offsets.shape[0]
-    ir_u = u[: n * n_s].reshape((n, n_s))
-    ground_u = u[n * n_s : n * (n_s + n_g)].reshape((n, n_g))
-    cos_h, sin_h = heading_cos_sin(pose)
-    pairs = neighbour_pairs(pose[:, 0], pose[:, 1], max(pair_cutoff_m, 2.0 * r_m + ir_range_m), 0.0, 0.0,
-                            width_m, height_m)
-    ir = _ir_readings(pose, cos_h, sin_h, r_m, ir_range_m, width_m, height_m, cos_a, sin_a, ir_u, ir_lo, ir_span,
-                      *pairs)
-    ground = _ground_readings(pose, cos_h, sin_h, offsets, discs, reflectance, ground_u, ground_lo, ground_span)
-    return ir, ground, pairs
+    The neighbour pairs within ``params[P_PAIR_CUTOFF]`` (at least the IR reach ``2 r + range``)
+    go to ``pair_ij`` and ``pair_f`` (:func:`neighbour_pairs_into`, with ``pair_scratch``), their
+    number to ``counts[C_PAIRS]``, ``pose`` to ``snapshot``: :func:`step_tick` reuses them while
+    the poses are these. If they do not fit, nothing else is done (no draw) and
+    ``counts[C_PAIRS]`` is minus the capacity needed: returns -1 then, else the number of
+    messages delivered. ``noise_u``: room for the ``N (S + G)`` uniforms.
 
-
-@njit(cache=True, error_model="numpy")
-def advance(pose, cmd, alive, vmax, tick_s, metres_per_step, slip_lo, slip_span, wheelbase_m, r_m, width_m,
-            height_m, iterations, ahead_m, discs, dist, bearing_atan, receiver_theta, range_lo, range_span,
-            bearing_lo, bearing_span, u, pair_i, pair_j, pair_cutoff_m):
-    """The rest of ``ForagingWorld.step`` in one call: :func:`rab_measure` of this tick's K
-    deliveries, :func:`move_bodies`, :func:`separate_bodies` and :func:`sensor_areas`. ``u``: the
-    K range and K bearing noise uniforms, then the ``(N, 2)`` slip uniforms, flat. ``pair_i``,
-    ``pair_j``: :func:`neighbour_pairs` of ``pose`` within ``pair_cutoff_m`` (0: none), for the
-    collisions (:func:`separate_bodies_near`).
-
-    Returns ``(pose, encoder, area, ok, range_m, bearing_rad)``. If not ``ok`` (see
-    :func:`separate_bodies`) ``pose`` is before collisions and ``area`` is not computed.
+    The messages that crossed at the last :func:`step_tick` (``counts[C_CROSSED]`` of them in
+    ``crossed_ij``, ``crossed_f``) to live receivers go to ``d_sender``, ... in order, their
+    number to ``counts[C_DELIVERED]``. ``trig`` ``(2, N)``: the cosines and sines of the headings
+    ``trig_pose`` that :func:`step_tick` left, used if the poses are still those.
     """
-    k, n = dist.shape[0], pose.shape[0]
-    range_m, bearing = rab_measure(dist, u[: 2 * k], range_lo, range_span, bearing_atan, receiver_theta,
-                                   bearing_lo, bearing_span)
-    slip_u = u[2 * k : 2 * k + 2 * n].reshape((n, 2))
-    moved, encoder = move_bodies(pose, cmd, alive, vmax, tick_s, metres_per_step, slip_u, slip_lo, slip_span, wheelbase_m)
-    pos = moved[:, :2].copy()
-    if not separate_bodies_near(pos, r_m, width_m, height_m, iterations, pose, pair_i, pair_j, pair_cutoff_m):
-        return moved, encoder, np.zeros(0, np.int8), False, range_m, bearing
-    moved[:, :2] = pos
-    return moved, encoder, sensor_areas(moved, ahead_m, discs), True, range_m, bearing
+    n, n_s, n_g = pose.shape[0], cos_a.shape[0], offsets.shape[0]
+    r_m, ir_range_m = params[P_BODY_RADIUS], params[P_IR_RANGE]
+    width_m, height_m = params[P_WIDTH], params[P_HEIGHT]
+    m = neighbour_pairs_into(pose[:, 0], pose[:, 1], params[P_PAIR_CUTOFF], 0.0, 0.0, width_m, height_m, pair_ij,
+                             pair_f, pair_scratch)
+    counts[C_PAIRS] = m
+    if m < 0:
+        return -1
+    snapshot[:] = pose
+    u = noise_u[: n * (n_s + n_g)]
+    fill_random(u, rng_fn, rng_state)
+    same = trig_pose.shape[0] == n
+    if same:
+        for i in range(n):
+            if trig_pose[i, 0] != pose[i, 0] or trig_pose[i, 1] != pose[i, 1] or trig_pose[i, 2] != pose[i, 2]:
+                same = False
+                break
+    if same:
+        cos_h, sin_h = trig[0], trig[1]
+    else:
+        cos_h, sin_h = heading_cos_sin(pose)
+    _ir_readings(pose, cos_h, sin_h, r_m, ir_range_m, width_m, height_m, cos_a, sin_a, u[: n * n_s].reshape((n, n_s)),
+                 params[P_IR_LO], params[P_IR_SPAN], pair_ij[0], pair_ij[1], pair_f[0], pair_f[1], pair_f[2], m, ir)
+    _ground_readings(pose, cos_h, sin_h, offsets, discs, reflectance, u[n * n_s :].reshape((n, n_g)),
+                     params[P_GROUND_LO], params[P_GROUND_SPAN], ground)
+    kept = 0
+    for q in range(counts[C_CROSSED]):
+        receiver = crossed_ij[1, q]
+        if not alive[receiver]:
+            continue  # a dead robot hears nothing
+        d_sender[kept] = crossed_ij[0, q]
+        d_receiver[kept] = receiver
+        d_range[kept] = crossed_f[0, q]
+        d_bearing[kept] = crossed_f[1, q]
+        kept += 1
+    counts[C_DELIVERED] = kept
+    return kept
+
+
+@njit(cache=True, error_model="numpy")
+def step_tick(pose, cmd, alive, sending, on_path, params, discs, rng_fn, rng_state, math_fns, pair_ij, pair_f,
+              snapshot, counts, pose_out, encoder_out, crossed_ij, crossed_f, tick, first_visit_tick, round_trips, stage,
+              stage_codes, trig, trig_pose, per_robot, work_i, work_f, step_u):
+    """``ForagingWorld.step`` in one call, drawing from the world's generator (see
+    :func:`observe_tick`) in the order of ``world/medium.py`` and ``ForagingWorld.step``.
+
+    1. The medium (:func:`rab_candidates_from_pairs` on the pairs of :func:`observe_tick` if
+       ``pose`` equals its ``snapshot``, else :func:`rab_candidates`; then a loss uniform per
+       candidate and :func:`rab_select`): the messages of live senders that cross, to
+       ``crossed_ij`` (sender, receiver) and ``crossed_f`` (the range and bearing the receiver
+       measures, as :func:`rab_measure`, with numpy's ``arctan2``: :func:`np_arctan2`), their
+       number to ``counts[C_CROSSED]``; the uniforms for the K range and K bearing noises and the
+       ``(N, 2)`` slips come as one ``random(2 K + 2 N)``;
+    2. :func:`move_bodies` into ``pose_out`` and ``encoder_out``, :func:`separate_bodies_near`;
+    3. if that succeeded (``counts[C_SEPARATED]`` = 1), the metrics' bookkeeping of ``tick``
+       (:func:`sensor_areas`, :func:`update_round_trips` with ``stage_codes`` = nest, prey, and the
+       three stages) and the number of live robots on the path, ``counts[C_ON_PATH]``; the
+       headings' cosines and sines go to ``trig`` for the next :func:`observe_tick`, with the
+       poses to ``trig_pose``. Else (a crowd) ``pose_out`` is before collisions and the caller
+       finishes the tick.
+
+    Scratch (reused from tick to tick: a swarm of thousands would otherwise allocate megabytes
+    per tick, which the C library hands back to the system and takes again, page by page):
+    ``per_robot`` ``(2, N + 1)``, ``work_i`` ``(5, L)``, ``work_f`` ``(7, L)`` with ``L`` at least
+    twice the pair capacity of ``pair_ij``, ``step_u`` room for ``2 K + 2 N`` uniforms.
+
+    Returns ``counts[C_ON_PATH]``, or -1 for a crowd.
+    """
+    n = pose.shape[0]
+    live_sending = np.empty(n, np.bool_)
+    for i in range(n):
+        live_sending[i] = sending[i] and alive[i]
+    n_pairs = counts[C_PAIRS]
+    same = (0 <= n_pairs <= pair_ij.shape[1] and snapshot.shape[0] == n and 2 * n_pairs <= work_i.shape[1]
+            and 2 * n_pairs <= work_f.shape[1])
+    if same:
+        for i in range(n):
+            if snapshot[i, 0] != pose[i, 0] or snapshot[i, 1] != pose[i, 1] or snapshot[i, 2] != pose[i, 2]:
+                same = False
+                break
+    if not same:
+        n_pairs = 0
+    pi = pair_ij[0, :n_pairs]
+    pj = pair_ij[1, :n_pairs]
+    rab_range_m = params[P_RAB_RANGE]
+    if same:  # the pairs' dx, dy, d2 are those of these very poses
+        m = rab_candidates_into(pose, live_sending, rab_range_m, pi, pj, pair_f[0], pair_f[1], pair_f[2], n_pairs,
+                                per_robot, work_i, work_f)
+        sender, receiver, dist, rel_x, rel_y = work_i[1], work_i[2], work_f[1], work_f[2], work_f[3]
+    else:
+        sender, receiver, dist, rel_x, rel_y = rab_candidates(pose, live_sending, rab_range_m)
+        m = sender.shape[0]
+    if m <= work_f.shape[1]:
+        loss_u, keep = work_f[4, :m], work_i[3:5]
+    else:  # a fresh search found more than the pairs' room
+        loss_u, keep = np.empty(m), np.empty((2, m), np.int64)
+    fill_random(loss_u, rng_fn, rng_state)
+    k = rab_select_into(receiver, dist, loss_u, m, params[P_NEAR], rab_range_m, params[P_LOSS_NEAR],
+                        params[P_LOSS_FAR], int(params[P_MAX_RECEIVED]), keep)
+    # The boards' measurements (rab_measure), straight into crossed_f
+    u = step_u[: 2 * k + 2 * n]
+    fill_random(u, rng_fn, rng_state)
+    rel = work_f[5:7, :k] if k <= work_f.shape[1] else np.empty((2, k))
+    for q in range(k):
+        c = keep[1, q]
+        crossed_ij[0, q] = sender[c]
+        crossed_ij[1, q] = receiver[c]
+        rel[0, q] = rel_x[c]
+        rel[1, q] = rel_y[c]
+    bearing_atan = crossed_f[1, :k]
+    np_arctan2(rel[1], rel[0], bearing_atan, math_fns)
+    range_lo, range_span = params[P_RANGE_LO], params[P_RANGE_SPAN]
+    bearing_lo, bearing_span = params[P_BEARING_LO], params[P_BEARING_SPAN]
+    for q in range(k):
+        v = dist[keep[1, q]] + uniform(range_lo, range_span, u[q])
+        crossed_f[0, q] = max(v, 0.0)  # np.maximum keeps -0.0
+        theta = pose[crossed_ij[1, q], 2]
+        crossed_f[1, q] = wrap(bearing_atan[q] - theta + uniform(bearing_lo, bearing_span, u[k + q]))
+    counts[C_CROSSED] = k
+    move_bodies(pose, cmd, alive, params[P_VMAX], params[P_TICK], params[P_METRES_PER_STEP],
+                u[2 * k :].reshape((n, 2)), params[P_SLIP_LO], params[P_SLIP_SPAN], params[P_WHEELBASE], pose_out,
+                encoder_out)
+    r_m = params[P_BODY_RADIUS]
+    pos = pose_out[:, :2].copy()
+    ok = separate_bodies_near(pos, r_m, params[P_WIDTH], params[P_HEIGHT], int(params[P_ITERATIONS]), pose, pi, pj,
+                              params[P_PAIR_CUTOFF] if same else 0.0)
+    counts[C_SEPARATED] = 1 if ok else 0
+    if not ok:
+        return -1
+    pose_out[:, :2] = pos
+    for i in range(n):
+        trig[0, i] = math.cos(pose_out[i, 2])
+        trig[1, i] = math.sin(pose_out[i, 2])
+    trig_pose[:] = pose_out
+    area = _sensor_areas(pose_out, trig[0], trig[1], params[P_AHEAD], discs)
+    update_round_trips(tick, area, first_visit_tick, round_trips, stage, stage_codes[0], stage_codes[1],
+                       stage_codes[2], stage_codes[3], stage_codes[4])
+    on = 0
+    for i in range(n):
+        if on_path[i] and alive[i]:
+            on += 1
+    counts[C_ON_PATH] = on
+    return on

@@ -24,6 +24,8 @@ from swarmloc.world.arena import AREA_NEST, AREA_PREY
 _NO_NEST = 0  # has not been in the nest yet
 _TO_PREY = 1  # left (or is in) the nest, heading for the prey
 _TO_NEST = 2  # has been in the prey after the nest, heading back
+#: The area and stage codes that the round-trip kernel compares with, in its argument order.
+STAGE_CODES = np.array([AREA_NEST, AREA_PREY, _NO_NEST, _TO_PREY, _TO_NEST], np.int64)
 
 
 class ForagingMetrics:
@@ -70,12 +72,28 @@ class ForagingMetrics:
 
         kernels.update_round_trips(
             tick, area.astype(np.int8, copy=False), self.first_visit_tick, self.round_trips,
-            self._stage, AREA_NEST, AREA_PREY, _NO_NEST, _TO_PREY, _TO_NEST,
+            self._stage, *STAGE_CODES,
         )
+        self._count_on_path(tick, int(np.count_nonzero(on_path)))
 
+    def kernel_state(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``(first_visit_tick, round_trips, stage, STAGE_CODES)``: the arrays that the world's
+        compiled step (``world/kernels.py: step_tick``) updates in place, as :meth:`update`
+        does, before it calls :meth:`counted`."""
+        return self.first_visit_tick, self.round_trips, self._stage, STAGE_CODES
+
+    def counted(self, tick: int, on_path_count: int) -> None:
+        """Record one tick whose round trips the world's kernel has already updated (see
+        :meth:`kernel_state`): ``on_path_count`` robots on the path."""
+        tick = int(tick)
+        if self._last_tick is not None and tick <= self._last_tick:
+            raise ValueError(f"tick must increase: got {tick} after {self._last_tick}")
+        self._count_on_path(tick, on_path_count)
+
+    def _count_on_path(self, tick: int, on_path_count: int) -> None:
         if tick % self.sample_every_ticks == 0:
             self._series_tick.append(tick)
-            self._series_count.append(int(np.count_nonzero(on_path)))
+            self._series_count.append(on_path_count)
         if self._first_tick is None:
             self._first_tick = tick
         self._last_tick = tick
