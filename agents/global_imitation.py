@@ -28,6 +28,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from swarmloc.agents.social_odometry import transform_received
+
 
 def _rotate(xy: np.ndarray, angle_rad: np.ndarray) -> np.ndarray:
     """Rotate points ``xy`` (..., 2) by ``angle_rad`` (...)."""
@@ -78,13 +80,16 @@ def transfer(
         range_m = range_m + rng.uniform(-range_noise_m, range_noise_m, (n, n))
         bearing_receiver_rad = bearing_receiver_rad + rng.uniform(-bearing_noise_rad, bearing_noise_rad, (n, n))
         bearing_sender_rad = bearing_sender_rad + rng.uniform(-bearing_noise_rad, bearing_noise_rad, (n, n))
-    # eq. 27 (as agents/social_odometry.py: transform_received), for every pair and goal
-    alpha = goal_angle_rad[None, :, :] - bearing_sender_rad[..., None]
-    phi = bearing_receiver_rad[..., None] + alpha - np.pi
-    local = np.stack([range_m[..., None] * np.cos(bearing_receiver_rad)[..., None]
-                      + goal_distance_m[None] * np.cos(phi),
-                      range_m[..., None] * np.sin(bearing_receiver_rad)[..., None]
-                      + goal_distance_m[None] * np.sin(phi)], axis=-1)  # (N, N, G, 2)
+    # eq. 27, the very function social odometry uses for one neighbour, for every pair and goal
+    n_goals = goal_xy.shape[1]
+    pair = np.broadcast_to
+    local = transform_received(
+        pair(range_m[..., None], (n, n, n_goals)).ravel(),
+        pair(bearing_receiver_rad[..., None], (n, n, n_goals)).ravel(),
+        pair(bearing_sender_rad[..., None], (n, n, n_goals)).ravel(),
+        pair(goal_distance_m[None], (n, n, n_goals)).ravel(),
+        pair(goal_angle_rad[None], (n, n, n_goals)).ravel(),
+    ).reshape(n, n, n_goals, 2)
     out = believed_pose[:, None, None, :2] + _rotate(local, believed_pose[:, None, None, 2])
     idx = np.arange(n)
     out[idx, idx] = goal_xy
