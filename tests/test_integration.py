@@ -19,13 +19,14 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from swarmloc.deploy.batch import run_batch
+from swarmloc.deploy.batch import run_batch, run_ticks, swarm_brain
 from swarmloc.deploy.launch import supervised
 from swarmloc.deploy.run import start_swarm
 from swarmloc.deploy.scenario import load_scenario
 from swarmloc.protocol.keys import Keys
 from swarmloc.protocol.messages import EpuckAct, WorldState, decode, encode
 from swarmloc.protocol.session import open_session, session_config
+from swarmloc.world.foraging import ForagingWorld
 
 pytestmark = pytest.mark.integration
 
@@ -90,11 +91,29 @@ class WorldWatch:
         self.session.close()
 
 
+def _batch_trajectory(scenario, every_ticks: int) -> dict[int, list]:
+    """True poses of a batch-engine run after every ``every_ticks``-th tick (what the world-server
+    publishes as world states), and after the last."""
+    world, brain = ForagingWorld(scenario.world), swarm_brain(scenario)
+    poses: dict[int, list] = {}
+
+    def record() -> None:  # before the world's step of tick k: the pose after k ticks
+        if world.tick % every_ticks == 0:
+            poses[world.tick] = world.pose.tolist()
+
+    run_ticks(world, brain, record)
+    poses[world.tick] = world.pose.tolist()
+    return poses
+
+
 def test_process_run_matches_batch_engine(tmp_path):
     scenario, path = _scenario(tmp_path, ["world.robots=4", "world.duration_s=40.0", "world.seed=7"])
     with supervised() as sup:
         swarm = Swarm(sup, tmp_path, path, robots=4)
-        result = swarm.results()
+        with WorldWatch(swarm.endpoint, swarm.keys) as watch:
+            result = swarm.results()
+            assert watch.wait_for(lambda s: s.tick == 400, 30), "the last world state never came"
+            states = list(watch.states)
         agent_codes = [a.wait(timeout=30) for a in swarm.agents]
     assert agent_codes == [0, 0, 0, 0], "agents end cleanly when the run ends"
     batch = run_batch(scenario)
@@ -102,6 +121,14 @@ def test_process_run_matches_batch_engine(tmp_path):
     assert result["transport"]["ticks"] == 400
     assert result["metrics"] == json.loads(json.dumps(batch.metrics))
     assert result["rejected"] == {}
+    # The same trajectories, bit for bit: every world state the processes published (every 10th
+    # tick, from whenever the watch joined) against the batch engine's poses at that tick.
+    trajectory = _batch_trajectory(scenario, every_ticks=10)
+    assert trajectory[400] == batch.final_pose.tolist()
+    seen = {s.tick: [list(p) for p in s.poses] for s in states}
+    assert len(seen) >= 20 and 400 in seen, f"too few world states recorded: {sorted(seen)}"
+    assert {t: seen[t] for t in seen} == {t: trajectory[t] for t in seen}
+    assert len({str(p) for p in seen.values()}) == len(seen), "the robots moved between states"
 
 
 def test_killed_agent_stands_still_and_run_goes_on(tmp_path):
