@@ -4,11 +4,11 @@ Seed ``003_5278cbbbf8cc61de.txt`` (Bori, Gasparri, Panzieri), §III-B, §IV and 
 runs one population of ``m`` pose hypotheses ``p = (x_m, y_m, theta_rad)`` (§IV-A). One step:
 
 1. **Kinematic update** (§IV-A): every individual is moved by the odometry ``(delta_s, delta_phi)``
-   with the unicycle of eq. 3 of seed 002 (:func:`swarmloc.world.laser.unicycle_model`), without
-   noise, as 003 describes it. Option ``motion_diffusion`` (ours, off by default) gives each
-   individual its own draw of the odometry noise the robot declares
-   (``LocalizerSetup.speed_std_mps``/``turn_rate_std_rad_s``); on the office map it made tracking
-   worse (drifting elites are not culled), so it stays off.
+   with the unicycle of eq. 3 of seed 002 (:func:`swarmloc.world.laser.unicycle_model`), each
+   with its own draw of the odometry noise the robot declares
+   (``LocalizerSetup.speed_std_mps``/``turn_rate_std_rad_s`` times ``dt_s``; option
+   ``motion_diffusion``, on by default) while the odometry reports a move; a robot whose
+   odometry reports no move stood still and the update is exact. See "Readings" below.
 2. **Raw fitness** (§IV-A): ``f = 1/L sum_i N(z^i - z^_i; 0, sigma)``, the mean over the ``L``
    beams of a Gaussian of the difference between the measured range and the one expected from the
    hypothesis (:class:`LaserFitness`, sigma = 0.5 m of table I). Poses outside the map get 0.
@@ -32,14 +32,52 @@ runs one population of ``m`` pose hypotheses ``p = (x_m, y_m, theta_rad)`` (§IV
 5. **Evolution** (§IV-A, table I): the ``p_b`` = 80 % best individuals by raw fitness are kept
    (elitism); the other ``p_s`` = 20 % are replaced: ``p_r`` = 5 % of ``m`` by random individuals
    drawn over the free space, the rest by offspring of parents chosen by tournaments of size
-   ``T`` = 2 over the (strengthened) shared fitness. An offspring is, with probability
+   ``T`` = 2 over the (strengthened) shared fitness of the kept individuals (option
+   ``parent_pool``, see "Readings" below). An offspring is, with probability
    ``p_c`` = 80 %, a crossover of its two parents (each gene a random convex combination of the
    parents' genes, the heading along the shorter arc), otherwise a copy of the first; then, with
    probability ``p_m`` = 10 %, a mutation (Gaussian perturbation of its genes).
 6. **Best individual** (§IV-A): among the individuals whose raw fitness is known (the elites), the
-   one that maximises raw fitness times the aging factor ``min(1 + aging_rate * age, aging_max)``,
-   ``age`` = how many generations the individual has survived. 003 names the factor (a memory
-   effect against chattering) without a formula; this one is ours.
+   one that maximises raw fitness times the aging factor (a memory effect against the chattering
+   of the best individual, which 003 names without a formula): individuals within sigma_s of the
+   last estimate (moved since by the odometry) get ``min(1 + aging_rate * estimate_age,
+   aging_max)``, the others 1. ``estimate_age`` counts the consecutive generations whose best
+   individual stayed within sigma_s of the previous one; it restarts at 0 when the estimate moves
+   to another niche, and when a teammate's virtual population supports some local individuals
+   but none near the estimate (:meth:`FitnessSharingGA.aging_factors`,
+   :meth:`FitnessSharingGA.hold_estimate`, :meth:`FitnessSharingGA.doubt_estimate`).
+
+**Readings where 003 is silent, and why** (measured on the robustness runs of 003 §V with
+``deploy/scenarios/laser/laser-robust-*.toml``, seeds not those of the report):
+
+- *Kinematic update with noise.* 003 says only that the odometry is applied to the kinematic
+  (unicycle) model; that model in the same group's GA (eq. 3 of 002) has a white-noise term. Without
+  it every individual moves rigidly with the commanded odometry, the kept 80 % never change, and
+  the population cannot follow the true heading's random walk (0.05 rad a step here, enough to
+  cost 9 % of the raw fitness at the true position): with the earlier code, started on the true
+  pose, 4 of 10 office runs lost the track; with diffusion none did (median error 6 cm).
+- *Parents from the kept individuals.* 003 uses the raw fitness to split the population into the
+  individuals preserved and those replaced, and builds the intermediate population by tournaments
+  over the shared fitness, without saying over which individuals. Drawn over everyone, 21 % of the
+  tournament winners were individuals that elitism discarded in the same generation (an isolated
+  individual's niche count of about 1 makes up for its low raw fitness); we draw them from the
+  kept ones (``parent_pool = "elites"``; ``"population"`` is the other reading).
+- *Aging factor of the estimate's niche.* Our earlier formula aged individuals
+  (``min(1 + 0.01 age, 1.1)``, ``age`` = generations survived); half of the kept individuals,
+  and two thirds of the chosen best ones, were past the 10 generations at which it saturates, so
+  it did not tell the hypothesis the estimate had held from any other survivor, and the estimate
+  chattered between rooms of similar fitness. The factor now rewards staying in the niche of the
+  last estimate. ``aging_max`` = 1.2: one step of unmodelled turn at twice the noise of table I
+  (0.1 rad) costs a well-placed individual about 18 % of its raw fitness, so another niche must
+  do better than that to take the estimate from one held for 20 generations (10 s here). 003
+  §IV-B lets a teammate's suggestion "diminish the confidence of local hypothesis": without the
+  reset on an unsupported estimate, a collaborating robot on the symmetric map kept an unsupported
+  copy of its pose after the virtual niches had moved 284 of its 300 individuals to the true one.
+  (A variant where the age also shrank by one for each generation the niche kept the estimate
+  only thanks to its factor ended more three-rooms runs in an identical wrong room.)
+
+Each of the three, taken out while the other two stay, raised the failure rate of 40 office runs
+from 15 % to 20-30 % (the earlier version, with none of them: 60 % of 20 runs).
 
 **The seam for other sensors.** The GA core, :class:`FitnessSharingGA`, knows nothing of lasers
 or maps. It takes
@@ -113,6 +151,8 @@ _HEADING_TOLERANCE_RAD = 1e-5
 _CAST_BLOCK_ELEMENTS = 1 << 16
 #: Upper bound on elements of one (rows, Q) block of pairwise distances (256 KB in float32).
 _PAIR_CHUNK_ELEMENTS = 1 << 16
+#: Values of :attr:`CFSGAParams.parent_pool`.
+PARENT_POOLS = ("elites", "population")
 
 
 # --------------------------------------------------------------------------------------------
@@ -147,11 +187,16 @@ class CFSGAParams:
     #: Mutation: standard deviations of the Gaussian perturbation of position and heading (ours).
     mutation_std_m: float = 0.20
     mutation_std_rad: float = 0.10
-    #: Aging factor min(1 + aging_rate * age, aging_max) (ours; 003 gives no formula).
+    #: Aging factor ``min(1 + aging_rate * estimate_age, aging_max)`` of the individuals in the
+    #: niche of the last estimate (ours; 003 gives no formula; see the module docstring).
     aging_rate: float = 0.01
-    aging_max: float = 1.10
-    #: Spread each individual by its own draw of the declared odometry noise (ours).
-    motion_diffusion: bool = False
+    aging_max: float = 1.20
+    #: Spread each individual by its own draw of the declared odometry noise while the robot
+    #: moves (the noise term of the unicycle model, eq. 3 of 002; see the module docstring).
+    motion_diffusion: bool = True
+    #: Who enters the tournaments: ``"elites"`` (the individuals elitism keeps this generation)
+    #: or ``"population"`` (everyone, also the ones it replaces). See the module docstring.
+    parent_pool: str = "elites"
     #: Random individuals keep this far from walls (free_space_sample's clearance).
     random_clearance_m: float = 0.3
     #: At most this many above-average individuals per radio payload (the fittest first).
@@ -181,6 +226,11 @@ class CFSGAParams:
         if not isinstance(self.motion_diffusion, bool):
             msg = f"motion_diffusion: must be true or false, got {self.motion_diffusion!r}"
             raise ValueError(msg)  # noqa: TRY004
+        if self.parent_pool not in PARENT_POOLS:
+            raise ValueError(
+                f"parent_pool: must be one of {', '.join(map(repr, PARENT_POOLS))}, "
+                f"got {self.parent_pool!r}"
+            )
         if abs(self.elite_fraction + self.selected_fraction - 1.0) > 1e-9:
             raise ValueError(
                 "elite_fraction + selected_fraction: must add up to 1 (p_b + p_s of table I), got "
@@ -194,6 +244,11 @@ class CFSGAParams:
         if self.n_elite < 1:
             raise ValueError(
                 f"elite_fraction: keeps no individual of a population of {self.population_size}"
+            )
+        if self.parent_pool == "elites" and self.tournament_size > self.n_elite:
+            raise ValueError(
+                f"tournament_size: must be <= the {self.n_elite} elites that enter the "
+                f"tournaments (parent_pool 'elites'), got {self.tournament_size!r}"
             )
 
     @property
@@ -324,7 +379,9 @@ def crossover(first: np.ndarray, second: np.ndarray, weights: np.ndarray) -> np.
 
 
 def aging_factor(age, aging_rate: float, aging_max: float) -> np.ndarray:
-    """Memory effect of the best-individual choice (003 §IV-A): ``min(1 + rate * age, max)``."""
+    """Memory effect of the best-individual choice (003 §IV-A): ``min(1 + rate * age, max)``,
+    ``age`` being how many generations the estimate has stayed in its niche
+    (:attr:`FitnessSharingGA.estimate_age`)."""
     return np.minimum(1.0 + aging_rate * np.asarray(age, dtype=np.float64), aging_max)
 
 
@@ -563,6 +620,12 @@ class FitnessSharingGA:
         self.age = np.zeros(m, dtype=np.int64)
         self.shared_fitness = np.full(m, np.nan)
         self.best_index = 0
+        #: The last estimate (best individual), moved since by the odometry without noise: the
+        #: centre of the niche the aging factor favours; None before the first generation.
+        self.estimate_anchor: np.ndarray | None = None
+        #: Consecutive generations whose best individual lay within the niche radius of the
+        #: previous estimate (0 after a jump to another niche).
+        self.estimate_age = 0
 
     # -- step parts ----------------------------------------------------------------------------
 
@@ -583,6 +646,10 @@ class FitnessSharingGA:
         delta_s = delta_s_m + draws[:, 0] * delta_s_std_m
         delta_phi = delta_phi_rad + draws[:, 1] * delta_phi_std_rad
         self.population = unicycle_model(self.population, delta_s, delta_phi)
+        if self.estimate_anchor is not None:
+            self.estimate_anchor = unicycle_model(
+                self.estimate_anchor[None, :], delta_s_m, delta_phi_rad
+            )[0]
 
     def evaluate(self, raw_fitness: RawFitness) -> np.ndarray:
         """Raw fitness of the whole population (``raw_fitness(poses) -> (m,)``, finite ``>= 0``)
@@ -627,16 +694,24 @@ class FitnessSharingGA:
 
     def evolve(self, virtual: np.ndarray | None = None) -> None:
         """One generation (003 §IV-A): elitism on raw fitness, tournaments on the (strengthened)
-        shared fitness, crossover, mutation, random individuals; then the best individual."""
+        shared fitness among the parent pool (:attr:`CFSGAParams.parent_pool`), crossover,
+        mutation, random individuals; then the best individual."""
         if not np.all(np.isfinite(self.raw_fitness)):
             raise RuntimeError("evolve() needs evaluate() first")
         p, rng = self.params, self.rng
         selection_fitness = self.strengthened_fitness(virtual)
+        self.doubt_estimate(virtual)
         order = np.argsort(-self.raw_fitness, kind="stable")
         elites = order[: p.n_elite]
 
         n_off = p.n_offspring
-        parents = tournament_select(selection_fitness, 2 * n_off, p.tournament_size, rng)
+        if p.parent_pool == "elites":
+            winners = tournament_select(
+                selection_fitness[elites], 2 * n_off, p.tournament_size, rng
+            )
+            parents = elites[winners]
+        else:
+            parents = tournament_select(selection_fitness, 2 * n_off, p.tournament_size, rng)
         first = self.population[parents[:n_off]]
         second = self.population[parents[n_off:]]
         cross = rng.random(n_off) < p.crossover_probability
@@ -659,16 +734,58 @@ class FitnessSharingGA:
         age = np.zeros(m, dtype=np.int64)
         age[: p.n_elite] = self.age[elites] + 1
         self.raw_fitness, self.shared_fitness, self.age = raw, shared, age
-        self.best_index = self.choose_best()
+        self.hold_estimate(self.choose_best())
+
+    def aging_factors(self) -> np.ndarray:
+        """``(m,)``: :func:`aging_factor` of :attr:`estimate_age` for the individuals whose
+        position lies within the niche radius of :attr:`estimate_anchor` (the niche of the last
+        estimate), 1 for the others (and for all before the first estimate)."""
+        m = self.population.shape[0]
+        if self.estimate_anchor is None:
+            return np.ones(m)
+        distance = np.hypot(
+            self.population[:, 0] - self.estimate_anchor[0],
+            self.population[:, 1] - self.estimate_anchor[1],
+        )
+        p = self.params
+        factor = float(aging_factor(self.estimate_age, p.aging_rate, p.aging_max))
+        return np.where(distance < self.niche_radius_m, factor, 1.0)
 
     def choose_best(self) -> int:
-        """Index of the individual with the highest raw fitness times aging factor, among those
-        whose raw fitness is known (003 §IV-A)."""
-        score = self.raw_fitness * aging_factor(
-            self.age, self.params.aging_rate, self.params.aging_max
-        )
+        """Index of the individual with the highest raw fitness times aging factor
+        (:meth:`aging_factors`), among those whose raw fitness is known (003 §IV-A)."""
+        score = self.raw_fitness * self.aging_factors()
         score = np.where(np.isfinite(score), score, -np.inf)
         return int(np.argmax(score))
+
+    def hold_estimate(self, index: int) -> None:
+        """Make individual ``index`` the estimate: :attr:`estimate_age` grows by one if it lies
+        within the niche radius of the previous estimate, else restarts at 0."""
+        pose = self.population[index]
+        anchor = self.estimate_anchor
+        same_niche = anchor is not None and (
+            math.hypot(pose[0] - anchor[0], pose[1] - anchor[1]) < self.niche_radius_m
+        )
+        self.estimate_age = self.estimate_age + 1 if same_niche else 0
+        self.estimate_anchor = pose.copy()
+        self.best_index = int(index)
+
+    def doubt_estimate(self, virtual: np.ndarray | None) -> None:
+        """003 §IV-B: a teammate's suggestion may "diminish the confidence of local hypothesis".
+        When the virtual population supports some local individual (the strengthening applies)
+        but has no individual within the niche radius of the held estimate, the estimate's age
+        restarts at 0, so its aging factor no longer holds it."""
+        if virtual is None or len(virtual) == 0 or self.estimate_anchor is None:
+            return
+        p = self.params
+        at_estimate = niche_counts(
+            self.estimate_anchor[None, :], virtual, self.niche_radius_m, p.sharing_alpha
+        )[0]
+        if at_estimate > 0.0:
+            return
+        local = niche_counts(self.population, virtual, self.niche_radius_m, p.sharing_alpha)
+        if np.any(local > 0.0):
+            self.estimate_age = 0
 
     @property
     def best_pose(self) -> np.ndarray:
@@ -751,10 +868,14 @@ class CFSGALocalizer:
         """Kinematic update, raw and shared fitness, collaboration, one generation."""
         setup, p = self.setup, self.params
         raw_fitness = self.fitness_model(obs)  # validates the scan before any state changes
-        diffusion = setup.dt_s if p.motion_diffusion else 0.0
+        delta_s = float(obs.odometry_delta_s_m)
+        delta_phi = float(obs.odometry_delta_phi_rad)
+        # Motion noise comes with motion: a robot whose odometry reports no move stood still.
+        moving = delta_s != 0.0 or delta_phi != 0.0
+        diffusion = setup.dt_s if p.motion_diffusion and moving else 0.0
         self.ga.kinematic_update(
-            float(obs.odometry_delta_s_m),
-            float(obs.odometry_delta_phi_rad),
+            delta_s,
+            delta_phi,
             setup.speed_std_mps * diffusion,
             setup.turn_rate_std_rad_s * diffusion,
         )

@@ -201,18 +201,100 @@ def test_elitism_keeps_the_best_individuals():
     np.testing.assert_array_equal(core.best_pose, pop[np.argmax(fitness)])
 
 
-def test_aging_factor_changes_the_choice_of_the_best():
+def test_aging_factor_formula():
     assert aging_factor([0, 5, 10, 50], 0.01, 1.1).tolist() == pytest.approx([1.0, 1.05, 1.1, 1.1])
-    core = small_core([[1.0, 1.0, 0.0], [5.0, 5.0, 0.0], [8.0, 2.0, 0.0]], aging_rate=0.01)
-    core.raw_fitness = np.array([0.50, 0.48, 0.10])
-    core.age = np.array([0, 10, 40])
-    # 0.48 * 1.1 = 0.528 > 0.50 * 1.0: the older, slightly less fit individual is chosen.
-    assert core.choose_best() == 1
-    core.age = np.array([0, 3, 40])  # 0.48 * 1.03 = 0.494 < 0.50
+    assert aging_factor(30, 0.01, 1.2) == pytest.approx(1.2)
+
+
+def test_aging_factor_favours_the_niche_of_the_last_estimate():
+    # Niche radius 2 m. The last estimate is at (1, 1), held for 10 generations: individuals
+    # closer than 2 m to it get min(1 + 0.01 * 10, 1.2) = 1.1, the others 1.
+    core = small_core(
+        [[1.5, 1.0, 0.0], [8.0, 8.0, 0.0], [1.0, 2.9, 0.0], [3.0, 1.0, 0.0]], aging_rate=0.01
+    )
+    core.estimate_anchor = np.array([1.0, 1.0, 0.0])
+    core.estimate_age = 10
+    # Distances to (1, 1): 0.5, 9.9, 1.9 (inside), and exactly 2.0 (outside: sh(2) = 0).
+    np.testing.assert_allclose(core.aging_factors(), [1.1, 1.0, 1.1, 1.0])
+    core.raw_fitness = np.array([0.50, 0.53, 0.10, 0.54])
+    # 0.50 * 1.1 = 0.55 beats 0.53 and 0.54 (no factor): the held niche keeps the estimate.
     assert core.choose_best() == 0
-    no_memory = small_core(core.population, aging_rate=0.0)
-    no_memory.raw_fitness, no_memory.age = core.raw_fitness, np.array([0, 10, 40])
-    assert no_memory.choose_best() == 0
+    core.estimate_age = 2  # 0.50 * 1.02 = 0.51 < 0.54
+    assert core.choose_best() == 3
+    core.estimate_age = 100  # capped: 0.50 * 1.2 = 0.60 < 0.61
+    core.raw_fitness = np.array([0.50, 0.61, 0.10, 0.54])
+    assert core.choose_best() == 1
+    # Newborns (raw fitness unknown) are never chosen, whatever their factor.
+    core.raw_fitness = np.array([np.nan, 0.2, 0.1, np.nan])
+    assert core.choose_best() == 1
+    # Before any estimate every factor is 1: the plain best raw fitness.
+    fresh = small_core(core.population)
+    fresh.raw_fitness = np.array([0.50, 0.53, 0.10, 0.54])
+    assert fresh.aging_factors().tolist() == [1.0] * 4 and fresh.choose_best() == 3
+
+
+def test_estimate_age_counts_generations_in_the_same_niche():
+    core = small_core([[1.0, 1.0, 0.0], [1.5, 1.0, 0.0], [9.0, 9.0, 0.0]])
+    core.hold_estimate(0)
+    assert core.estimate_age == 0 and core.best_index == 0
+    core.hold_estimate(1)  # 0.5 m from the last estimate (< 2 m): same niche
+    core.hold_estimate(1)
+    assert core.estimate_age == 2
+    np.testing.assert_array_equal(core.estimate_anchor, [1.5, 1.0, 0.0])
+    core.hold_estimate(2)  # another niche: the count restarts
+    assert core.estimate_age == 0 and core.best_index == 2
+    np.testing.assert_array_equal(core.best_pose, [9.0, 9.0, 0.0])
+
+
+def test_the_estimate_anchor_follows_the_odometry_without_noise():
+    # The population gets its own noise draws (diffusion); the anchor moves by the exact unicycle:
+    # from (2, 3, 0) by 1 m and a quarter turn, along the mean heading pi/4.
+    core = small_core([[2.0, 3.0, 0.0], [5.0, 5.0, 1.0]])
+    core.hold_estimate(0)
+    core.kinematic_update(1.0, math.pi / 2, 0.1, 0.1)
+    h = math.sqrt(0.5)
+    np.testing.assert_allclose(core.estimate_anchor, [2.0 + h, 3.0 + h, math.pi / 2], atol=1e-12)
+    assert not np.allclose(core.population[0], core.estimate_anchor, atol=1e-6)
+
+
+def test_a_teammate_suggestion_that_misses_the_estimate_resets_its_age():
+    # Niche radius 2 m; the estimate at (1, 1) has been held for 10 generations.
+    core = small_core([[1.0, 1.0, 0.0], [8.0, 8.0, 0.0], [8.5, 8.0, 0.0]])
+
+    def doubted(virtual):
+        core.estimate_anchor, core.estimate_age = np.array([1.0, 1.0, 0.0]), 10
+        core.doubt_estimate(virtual)
+        return core.estimate_age
+
+    # Virtual individuals near the local ones at (8, 8) but none within 2 m of (1, 1): reset.
+    assert doubted(np.array([[8.2, 8.0, 0.0], [7.0, 9.0, 1.0]])) == 0
+    # One of them within 2 m of the estimate (1.9 m away): the estimate is supported, kept.
+    assert doubted(np.array([[8.2, 8.0, 0.0], [2.9, 1.0, 0.0]])) == 10
+    # Near no local individual at all: the suggestion is unusable (as for f~_sh), kept.
+    assert doubted(np.array([[50.0, 50.0, 0.0]])) == 10
+    assert doubted(np.empty((0, 3))) == 10 and doubted(None) == 10
+
+
+def test_a_held_niche_keeps_the_estimate_until_another_is_clearly_fitter():
+    # Two niches of 50 copies each, 6 m apart (niche radius 2 m); aging_rate 0.05, aging_max 1.3.
+    # Generations 1-4: equally fit (0.5); the first picks the left niche (a tie goes to the lower
+    # index, no factor yet), each later one adds 1 to the estimate's age (3 after the fourth).
+    # Generations 5-6: the right niche scores 0.53, but the left one scores 0.5 * 1.15 = 0.575,
+    # then 0.5 * 1.2 = 0.6: the estimate stays (age 4, 5). Generation 7: the right niche scores
+    # 0.85 > 0.5 * 1.25: the estimate moves (age 0). Without aging it moves in generation 5.
+    pop = np.array([[1.0, 1.0, 0.0]] * 50 + [[7.0, 7.0, 0.0]] * 50)
+    history = {}
+    for rate in (0.05, 0.0):
+        core = small_core(pop, aging_rate=rate, aging_max=1.3, crossover_probability=0.0,
+                          mutation_probability=0.0, random_fraction=0.0)
+        history[rate] = []
+        for right in (0.5, 0.5, 0.5, 0.5, 0.53, 0.53, 0.85):
+            core.kinematic_update(0.0, 0.0)
+            core.evaluate(lambda poses, r=right: np.where(poses[:, 0] < 4.0, 0.5, r))
+            core.evolve()
+            history[rate].append((core.best_pose[0], core.estimate_age))
+    assert history[0.05] == [(1.0, 0), (1.0, 1), (1.0, 2), (1.0, 3), (1.0, 4), (1.0, 5), (7.0, 0)]
+    assert history[0.0] == [(1.0, 0), (1.0, 1), (1.0, 2), (1.0, 3), (7.0, 0), (7.0, 1), (7.0, 2)]
 
 
 def test_ages_count_survived_generations():
@@ -224,6 +306,88 @@ def test_ages_count_survived_generations():
         core.evolve()
         assert core.age[0] == generation
         np.testing.assert_array_equal(core.population[0], keep[0])
+
+
+def _pool_population():
+    # 80 elites stacked on (0, 0) with raw fitness 0.9: niche count 80, shared fitness 0.01125.
+    # 20 individuals 3 m apart on y = -20 (niche radius 2 m) with raw fitness 0.1: niche count 1,
+    # shared fitness 0.1, so each wins every tournament it enters.
+    pop = np.zeros((100, 3))
+    pop[80:, 0] = 3.0 * np.arange(20)
+    pop[80:, 1] = -20.0
+    fitness = np.where(np.arange(100) < 80, 0.9, 0.1)
+    return pop, fitness
+
+
+def test_parents_are_drawn_from_the_kept_individuals():
+    # No crossover, no mutation: each offspring is a copy of its first parent. With the parent pool
+    # "elites" every offspring copies one of the 80 elites (all at (0, 0)).
+    pop, fitness = _pool_population()
+    core = small_core(pop, crossover_probability=0.0, mutation_probability=0.0)
+    core.evaluate(constant_fitness(fitness))
+    core.evolve()
+    p = core.params
+    assert (p.n_elite, p.n_offspring, p.n_random) == (80, 15, 5)
+    offspring = core.population[p.n_elite : p.n_elite + p.n_offspring]
+    np.testing.assert_array_equal(offspring, np.zeros((15, 3)))
+
+
+def test_parent_pool_population_lets_discarded_individuals_breed():
+    # The other reading: everyone enters the tournaments. A tournament of 2 distinct individuals
+    # holds one of the 20 discarded ones with probability 1 - (80/100)(79/99) = 0.362, and that
+    # one wins; over 15 offspring none copies a discarded one with probability 0.638^15 = 0.1 %.
+    # Over 20 generations (fresh copies each time) the share of such offspring is 0.362 within
+    # 4 standard deviations (300 draws).
+    pop, fitness = _pool_population()
+    copies = []
+    for seed in range(20):
+        core = small_core(pop, crossover_probability=0.0, mutation_probability=0.0,
+                          parent_pool="population")
+        core.rng = np.random.default_rng(seed)
+        core.evaluate(constant_fitness(fitness))
+        core.evolve()
+        offspring = core.population[80:95]
+        copies.append(offspring[:, 1] == -20.0)
+    share = np.mean(copies)
+    expected = 1.0 - (80 / 100) * (79 / 99)
+    assert share == pytest.approx(expected, abs=4.0 * math.sqrt(expected * (1 - expected) / 300))
+
+
+def _exact_moves_of_previous(previous, current_elites, delta_s, delta_phi):
+    """For each elite, whether it is exactly a noise-free unicycle move of some previous
+    individual."""
+    from swarmloc.world.laser import unicycle_model
+
+    moved = unicycle_model(previous, delta_s, delta_phi)
+    gaps = np.abs(current_elites[:, None, :] - moved[None, :, :]).max(axis=2).min(axis=1)
+    return gaps < 1e-12
+
+
+@pytest.mark.parametrize(
+    "diffusion, delta_s, delta_phi, exact",
+    [
+        (True, 0.0, 0.0, True),  # standing: odometry reports no move, no noise
+        (False, 0.1, 0.05, True),  # moving, diffusion off: the plain kinematic update of 003
+        (True, 0.1, 0.05, False),  # moving, diffusion on: every individual its own noise draw
+        (True, 0.0, 0.2, False),  # turning in place is a move too
+    ],
+)
+def test_motion_diffusion_only_while_the_odometry_reports_a_move(
+    diffusion, delta_s, delta_phi, exact
+):
+    # The kept individuals of a generation are the previous population moved by the kinematic
+    # update (elites are copied unchanged), so they show whether that update had noise.
+    setup = make_setup()
+    params = CFSGAParams(population_size=50, motion_diffusion=diffusion)
+    loc = CFSGALocalizer(setup, params, np.random.default_rng(12))
+    ranges = np.full(18, 3.0)
+    loc.step(LaserObservation(0, 0.0, 0.0, ranges))
+    previous = loc.ga.population.copy()
+    loc.step(LaserObservation(1, delta_s, delta_phi, ranges))
+    elites = loc.ga.population[: params.n_elite]
+    assert np.all(_exact_moves_of_previous(previous, elites, delta_s, delta_phi)) == exact
+    if not exact:  # with noise, no kept individual is an exact move
+        assert not np.any(_exact_moves_of_previous(previous, elites, delta_s, delta_phi))
 
 
 def test_random_individuals_and_offspring_counts():
@@ -457,6 +621,8 @@ def test_defaults_are_table_one():
         ({"niche_radius_fraction": "5%"}, "niche_radius_fraction"),
         ({"aging_max": 0.9}, "aging_max"),
         ({"motion_diffusion": 1}, "motion_diffusion"),
+        ({"parent_pool": "everyone"}, "parent_pool"),
+        ({"population_size": 3, "tournament_size": 3}, "tournament_size"),  # 2 elites
         ({"max_shared_individuals": MAX_SHARED_INDIVIDUALS + 1}, "max_shared_individuals"),
     ],
 )
