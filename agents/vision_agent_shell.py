@@ -65,7 +65,15 @@ class VisionAgent:
         self._pub = session.declare_publisher(
             keys.team_blobs(self.team, self.robot_id), congestion_control=zenoh.CongestionControl.BLOCK
         )
-        return [session.declare_subscriber(f"{keys.prefix}/team/{self.team}/blobs/*", self._on_blobs)]
+        # Run in Zenoh's receiving task, not on a Python thread of its own: a teammate's payload of
+        # tick k reaches us before the world's Sense of tick k+1 (the world sends that only after
+        # the teammate's Act k, which the teammate puts after its payload), and a direct callback
+        # files it before the Sense is even dispatched. With the default indirect callback the
+        # two ran on two Python threads, and the Sense's thread could win the race: the payload
+        # then reached the brain a tick late (seen as a process run differing from the in-process
+        # one under load, about 1 run in 8).
+        return [session.declare_subscriber(f"{keys.prefix}/team/{self.team}/blobs/*",
+                                           zenoh.handlers.Callback(self._on_blobs, indirect=False))]
 
     def _on_blobs(self, sample: zenoh.Sample) -> None:
         key = str(sample.key_expr)
