@@ -680,15 +680,22 @@ class FitnessSharingGA:
             chosen = chosen[:limit]
         return self.population[chosen].copy()
 
-    def strengthened_fitness(self, virtual: np.ndarray | None) -> np.ndarray:
-        """``f~_sh,i = f_sh,i * n_v,i`` (003 §IV-B), or ``f_sh`` when there is no virtual
-        population or no local individual falls in any virtual niche."""
+    def virtual_niche_counts(self, virtual: np.ndarray | None) -> np.ndarray | None:
+        """``n_v,i`` (003 §IV-B): each local individual's niche count in the virtual population,
+        or None without one."""
         if virtual is None or len(virtual) == 0:
-            return self.shared_fitness
-        counts = niche_counts(
-            self.population, virtual, self.niche_radius_m, self.params.sharing_alpha
-        )
-        if not np.any(counts > 0.0):
+            return None
+        return niche_counts(self.population, virtual, self.niche_radius_m, self.params.sharing_alpha)
+
+    def strengthened_fitness(
+        self, virtual: np.ndarray | None, counts: np.ndarray | None = None
+    ) -> np.ndarray:
+        """``f~_sh,i = f_sh,i * n_v,i`` (003 §IV-B), or ``f_sh`` when there is no virtual
+        population or no local individual falls in any virtual niche. ``counts``: the
+        :meth:`virtual_niche_counts` of ``virtual`` if the caller has them already."""
+        if counts is None:
+            counts = self.virtual_niche_counts(virtual)
+        if counts is None or not np.any(counts > 0.0):
             return self.shared_fitness
         return self.shared_fitness * counts
 
@@ -699,8 +706,9 @@ class FitnessSharingGA:
         if not np.all(np.isfinite(self.raw_fitness)):
             raise RuntimeError("evolve() needs evaluate() first")
         p, rng = self.params, self.rng
-        selection_fitness = self.strengthened_fitness(virtual)
-        self.doubt_estimate(virtual)
+        counts = self.virtual_niche_counts(virtual)  # once, for both uses
+        selection_fitness = self.strengthened_fitness(virtual, counts)
+        self.doubt_estimate(virtual, counts)
         order = np.argsort(-self.raw_fitness, kind="stable")
         elites = order[: p.n_elite]
 
@@ -770,11 +778,12 @@ class FitnessSharingGA:
         self.estimate_anchor = pose.copy()
         self.best_index = int(index)
 
-    def doubt_estimate(self, virtual: np.ndarray | None) -> None:
+    def doubt_estimate(self, virtual: np.ndarray | None, counts: np.ndarray | None = None) -> None:
         """003 §IV-B: a teammate's suggestion may "diminish the confidence of local hypothesis".
         When the virtual population supports some local individual (the strengthening applies)
         but has no individual within the niche radius of the held estimate, the estimate's age
-        restarts at 0, so its aging factor no longer holds it."""
+        restarts at 0, so its aging factor no longer holds it. ``counts``: as for
+        :meth:`strengthened_fitness`."""
         if virtual is None or len(virtual) == 0 or self.estimate_anchor is None:
             return
         p = self.params
@@ -783,7 +792,7 @@ class FitnessSharingGA:
         )[0]
         if at_estimate > 0.0:
             return
-        local = niche_counts(self.population, virtual, self.niche_radius_m, p.sharing_alpha)
+        local = counts if counts is not None else self.virtual_niche_counts(virtual)
         if np.any(local > 0.0):
             self.estimate_age = 0
 
