@@ -24,21 +24,51 @@ Seed ``/work/shared/seeds/002_fe2ac635ba0eab3e.txt`` (Gasparri, Panzieri, Pascuc
 - **Kinematic update, eq. 3**: every individual moves with the robot's odometry through
   :func:`swarmloc.world.laser.unicycle_model`, plus Gaussian noise of the motion model's standard
   deviations (table 2: sigma_s), which keeps the population diverse and covers the true motion's
-  noise.
+  noise; with ``elite_exact_motion`` (table 3's spec sets it) the last step's best individual
+  moves without that noise (readings below).
 - **Estimate**: the best individual (highest fitness at this step; the mating rules never replace
-  it, so it is still in the population after reproduction).
+  it, so it is still in the population after reproduction). 002 §6 names only "the estimate";
+  §3 speaks of individuals as hypotheses and of "monitoring the formation of a single cluster",
+  not of averaging them. On table 3's floor (seeds 1001-1010, MR-SSGA 100, converged robots,
+  steps >= 250) the fitness-weighted mean of the best individual's niche (within 0.5 m and
+  0.5 rad, or 0.25 m) erred by the same as the best individual to within 0.01 m, so we keep
+  the best individual.
 
 Readings of the text (the seed leaves them open):
 
 - eq. 1 prints ``exp(-(z - z^)^2 / 2 sigma)`` with ``1 / (sqrt(2 pi) sigma)`` in front, eq. 2
   ``1 / sqrt(2 pi sigma)``; we use the normal density with standard deviation
-  ``fitness_sigma_m`` (``sigma`` as a length, "a measure of confidence"; not in table 2).
+  ``fitness_sigma_m`` (``sigma`` as a length, "a measure of confidence"; not in table 2). The
+  default 0.2 m is twice table 2's beam noise sigma_b; sigma = sigma_b = 0.1 m was worse on table
+  3's floor (seeds 1001-1010, MR-SSGA 100, 2 % rewiring: 3 of 10 trials converged instead of
+  6, converged robots 0.207 m instead of 0.148 m).
 - Algorithm 1 visits the links one after the other and overwrites individuals in place. Here all
   links are evaluated at once on generation ``k`` (synchronous update, vectorised): every link
   proposes an offspring for its target, and a target with several proposals takes one at random,
   an offspring of a HIGH parent always before a self-mutation (in the sequential loop a
   self-mutation after a replacement would only mutate the HIGH parent's copy). Ties in HIGH-HIGH
   follow Algorithm 1: ``p_i`` is replaced unless ``Phi_i > Phi_j``.
+- *The elite moves noise-free* (``elite_exact_motion``, off by default, on in table 3's spec).
+  Table 1 names elitism: the best individual survives reproduction. Eq. 3's noise then still
+  jittered it (0.1 rad a step: table 2's 0.2 rad/s over 0.5 s, which turns a 6 m beam's end by
+  0.6 m, three times the fitness sigma), so the best hypothesis of step ``k`` was no longer
+  itself at ``k + 1``. The individual equal to the last step's best (after reproduction) is moved
+  by the odometry alone; the others diffuse, so the population still follows the true motion's
+  noise. Table 3's floor, MR-SSGA 100 on a ring, seeds 1001-1024 (instrumented previews):
+  converged robots' final error 0.129 m mean without it, 0.113 m with it (medians 0.131, 0.104),
+  and 21 of 24 trials converged with it against 17 of 24 without.
+- *Noise while the robot stands* (kept). Eq. 3's noise is white and additive, so the individuals
+  diffuse even when the odometry reads zero, although our world's robot, held still by its
+  driver, does not move at all. Switching the noise off for zero odometry sharpened the converged
+  robots (table 3's robots stand for the whole final window: 0.129 -> 0.083 m mean, same seeds
+  and network) but cost convergence (11 of 24 trials instead of 17; with the elite rule too, 10
+  of 24 at 0.071 m): a standing robot's diffusion keeps a population that has taken over a
+  wrong room diverse until a teammate disambiguates it.
+- *What bounds the accuracy.* With 8 beams of 0.1 m noise the argmax of eq. 1 over a dense grid
+  around a standing robot's true pose (fresh noise each time) is 0.05-0.14 m from it, and 0.09-
+  0.10 m with eq. 2's teammates (3 deg of bearing noise moves a teammate 8 m away by 0.4 m); an
+  individual that keeps winning over many steps averages some of that noise out, which is how
+  the GA gets below it. 002's 1-2 cm mean (table 3) is below these figures.
 - Hypotheses outside the map bounds have fitness 0 (a laser from outside a closed map would
   still see walls).
 - Timing of eq. 2: teammates broadcast their scan of step ``k``; it arrives at step ``k + 1``.
@@ -127,6 +157,8 @@ class GeneticParams:
     between: "inversely proportional to its fitness", 002 §2.1).
     ``init_clearance_m``: the initial population is uniform over the free space at least this far
     from walls (no prior, 002 §5.2).
+    ``elite_exact_motion``: eq. 3 moves the last step's best individual by the odometry alone,
+    without the motion noise every other individual gets (module docstring, readings).
     """
 
     population_size: int = 100
@@ -136,9 +168,14 @@ class GeneticParams:
     mutation_std_min_rad: float = 0.02
     mutation_std_max_rad: float = 0.5
     init_clearance_m: float = 0.1
+    elite_exact_motion: bool = False
 
     def __post_init__(self) -> None:
         _positive_int(self.population_size, "population_size", minimum=2)
+        if not isinstance(self.elite_exact_motion, (bool, np.bool_)):
+            raise TypeError(
+                f"elite_exact_motion: must be true or false, got {self.elite_exact_motion!r}"
+            )
         _real(self.fitness_sigma_m, "fitness_sigma_m", open_lo=True)
         for kind in ("m", "rad"):
             lo_name, hi_name = f"mutation_std_min_{kind}", f"mutation_std_max_{kind}"
@@ -599,6 +636,7 @@ class GeneticLocalizer:
         )
         self.fitness = np.zeros(params.population_size)
         self._best = self.population[0].copy()
+        self._elite: int | None = None
         self._step: int | None = None
         self._last_ranges: np.ndarray | None = None
         # Sightings of the current and the previous step, by robot id; own odometry of this step.
@@ -642,6 +680,10 @@ class GeneticLocalizer:
         self._best = self.population[int(np.argmax(self.fitness))].copy()
         peak = self.fitness_model.peak * (1 + len(views))
         self.population = self._reproduce(self.population, self.fitness, peak)
+        # The elite: the best individual, copied unchanged by reproduction (MR-SSGA's mating
+        # rules never replace it; the simple GA copies its elites); eq. 3 moves it noise-free.
+        kept = np.flatnonzero(np.all(self.population == self._best, axis=1))
+        self._elite = int(kept[0]) if kept.size else None
         self._last_ranges = ranges
         self._step = obs.step
 
@@ -679,8 +721,15 @@ class GeneticLocalizer:
 
     def _kinematic_update(self, poses_m: np.ndarray, delta_s_m: float, delta_phi_rad: float):
         """Eq. 3 on every individual with the odometry plus Gaussian noise of the motion
-        model's standard deviations. One ``rng.normal`` draw ``(N, 2)``."""
+        model's standard deviations; with ``elite_exact_motion``, none for the last step's best
+        individual (see the module docstring). One ``rng.normal`` draw ``(N, 2)`` in every case."""
         noise = self.rng.normal(0.0, 1.0, size=(poses_m.shape[0], 2)) * self._motion_std
+        if (
+            self.params.elite_exact_motion
+            and self._elite is not None
+            and self._elite < noise.shape[0]
+        ):
+            noise[self._elite] = 0.0
         self._odometry = (float(delta_s_m), float(delta_phi_rad))
         return unicycle_model(poses_m, delta_s_m + noise[:, 0], delta_phi_rad + noise[:, 1])
 

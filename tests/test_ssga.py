@@ -694,6 +694,60 @@ def test_localizer_contract(cls, population_size):
 
 
 # --------------------------------------------------------------------------------------------
+# Kinematic update (eq. 3): the elite moves noise-free with elite_exact_motion
+# --------------------------------------------------------------------------------------------
+
+
+def stepped_localizer(cls, elite_exact_motion: bool, population_size: int = 400):
+    """A localizer (table 2 motion noise: 3 cm/s, 0.2 rad/s, dt 0.5 s) after one step in the
+    office, so that it has a best individual."""
+    world = build_map("office")
+    rng = np.random.default_rng(11)
+    config = {"population_size": population_size, "elite_exact_motion": elite_exact_motion}
+    loc = cls.from_config(make_setup(dt_s=0.5), config, rng)
+    z = scan(world, np.array([[2.0, 6.0, 0.0]]), LaserParams.mr_ssga(), rng)[0]
+    loc.step(LaserObservation(0, 0.0, 0.0, z))
+    return loc
+
+
+@pytest.mark.parametrize("cls", [SSGALocalizer, SimpleGALocalizer])
+@pytest.mark.parametrize("elite_exact_motion", [True, False])
+@pytest.mark.parametrize("odometry", [(0.1, 0.05), (0.0, 0.0)])
+def test_eq3_noise_and_the_elite(cls, elite_exact_motion, odometry):
+    """Every individual but the elite scatters about noise-free eq. 3 with the motion model's
+    standard deviations (0.03 m/s * 0.5 s = 0.015 m along the way, 0.2 rad/s * 0.5 s = 0.1 rad
+    of heading; within 10 % over ~400), standing (zero odometry) or not; the last step's best
+    individual moves exactly by eq. 3 with elite_exact_motion, and is jittered without it."""
+    loc = stepped_localizer(cls, elite_exact_motion)
+    before = loc.population.copy()
+    elite = np.flatnonzero(np.all(before == loc.estimate(), axis=1))
+    assert elite.size >= 1  # the best survived reproduction
+    ds, dphi = odometry
+    after = loc._kinematic_update(before, ds, dphi)
+    exact = unicycle_model(before, ds, dphi)
+    elite_moved = np.abs(after[elite[0]] - exact[elite[0]]).max()
+    if elite_exact_motion:
+        assert elite_moved < 1e-12
+    else:
+        assert elite_moved > 1e-6
+    others = np.setdiff1d(np.arange(before.shape[0]), elite[:1])
+    heading_dev = wrap_angle(after[others, 2] - exact[others, 2])
+    assert np.std(heading_dev) == pytest.approx(0.1, rel=0.1)
+    # The move's length is ds + noise; along the noise-free direction of travel
+    # (heading + delta_phi / 2) the deviation is about the speed noise, 0.015 m.
+    travel = before[others, 2] + dphi / 2.0
+    along = (after[others, 0] - before[others, 0]) * np.cos(travel) + (
+        after[others, 1] - before[others, 1]
+    ) * np.sin(travel)
+    assert np.std(along - ds) == pytest.approx(0.015, rel=0.1)
+
+
+def test_elite_exact_motion_must_be_a_bool():
+    with pytest.raises(ValueError, match="elite_exact_motion"):
+        SSGALocalizer.from_config(make_setup(), {"elite_exact_motion": 1}, np.random.default_rng(0))
+
+
+# --------------------------------------------------------------------------------------------
 # Simple GA operators
 # --------------------------------------------------------------------------------------------
 
