@@ -42,6 +42,7 @@ class ForagingAgent:
         from swarmloc.agents.foraging import Inbox
 
         self.brain = brain
+        brain.reuse_outputs = True  # act() encodes each answer before the next tick
         self.robot_id = robot_id
         self._capacity = brain.config.heard_capacity
         self._no_mail = Inbox.empty(self._capacity)

@@ -184,19 +184,15 @@ class SocialMessages:
 
     def encode(self, row: int) -> bytes:
         """The payload bytes of one message (msgpack, float32): at most 64 bytes."""
-        known = self.goal_known[row]
+        known = self.goal_known[row].tolist()
+        distance, angle, p = (self.goal_distance_m[row].tolist(), self.goal_angle_rad[row].tolist(),
+                              self.goal_p_m[row].tolist())
         heard = []
-        for rid, bearing in zip(self.heard_ids[row], self.heard_bearing_rad[row]):
+        for rid, bearing in zip(self.heard_ids[row].tolist(), self.heard_bearing_rad[row].tolist()):
             if rid >= 0:
-                heard += [int(rid), float(bearing)]
-        body = [int(known[0]) | (int(known[1]) << 1)]
-        for g in (NEST, PREY):
-            body += [
-                float(self.goal_distance_m[row, g]),
-                float(self.goal_angle_rad[row, g]),
-                float(self.goal_p_m[row, g]),
-            ]
-        body.append(heard)
+                heard += [rid, bearing]
+        body = [int(known[NEST]) | (int(known[PREY]) << 1),
+                distance[NEST], angle[NEST], p[NEST], distance[PREY], angle[PREY], p[PREY], heard]
         return msgpack.packb(body, use_single_float=True)
 
     @classmethod
@@ -448,9 +444,22 @@ class ForagingBrain:
         return (self._params, self._settings, self._math, fn, rng_state, _COS_IR, _SIN_IR,
                 self._geometry, self._atan, self._need, self._n_need)
 
+    #: Reuse one set of output arrays for every tick (an agent process, which encodes each
+    #: answer before the next tick) instead of fresh ones (the default: callers may keep them).
+    reuse_outputs = False
+    _kept_outputs: tuple | None = None
+
     def _outputs(self) -> tuple:
-        """Fresh arrays for the answer: wheel speeds, the 6 message fields (no rows if the
-        strategy does not communicate), state codes, pose estimates, on_path."""
+        """Arrays for the answer: wheel speeds, the 6 message fields (no rows if the strategy
+        does not communicate), state codes, pose estimates, on_path; fresh unless
+        ``reuse_outputs``."""
+        if self.reuse_outputs:
+            if self._kept_outputs is None:
+                self._kept_outputs = self._fresh_outputs()
+            return self._kept_outputs
+        return self._fresh_outputs()
+
+    def _fresh_outputs(self) -> tuple:
         n, k = self.n, self.config.heard_capacity
         rows = n if self.strategy.communicates else 0
         return (np.empty((n, 2)), np.empty((rows, 2), bool), np.empty((rows, 2)), np.empty((rows, 2)),
