@@ -510,11 +510,10 @@ PAPER_FAILURE = {"cfsga": 0.0, "amcl": 0.35, "ssga": 0.15}
 
 
 def _robustness(rows: list[dict], out: Path, reasons: dict) -> Section:
-    by_algo: dict[str, list[dict]] = defaultdict(list)
-    for r in rows:
-        by_algo[r["algorithm"]].append(r)
+    by_algo = _variants(rows)  # an algorithm, or a named variant of one (amcl-no-recovery)
     maps = sorted({r["map"] for r in rows})
-    order = [a for a in ("cfsga", "ssga", "amcl") if a in by_algo]
+    order = [a for a in ("cfsga", "ssga", "amcl") if a in by_algo] + sorted(
+        set(by_algo) - {"cfsga", "ssga", "amcl"})
     lines = [
         ("One robot, random start and random goals one after another (driver `random_goals`), "
         f"400 steps, in {' and '.join(f'`{m}`' for m in maps)} "
@@ -528,8 +527,9 @@ def _robustness(rows: list[dict], out: Path, reasons: dict) -> Section:
     fig, axes = _figure(8.0, 4.4)
     ax = axes[0][0]
     width = 0.8 / (len(maps) + 1)
-    for i, algorithm in enumerate(order):
-        g = by_algo[algorithm]
+    for i, variant in enumerate(order):
+        g = by_algo[variant]
+        algorithm, label = g[0]["algorithm"], _variant_label(variant, g)
         cells = []
         for j, m in enumerate([*maps, None]):
             sub = [r for r in g if m is None or r["map"] == m]
@@ -541,14 +541,14 @@ def _robustness(rows: list[dict], out: Path, reasons: dict) -> Section:
             ax.bar(x, rate, width * 0.9, color=_COLOURS.get(algorithm, "grey"),
                    alpha=0.45 if m is not None else 0.9, edgecolor="black", lw=0.5)
             ax.errorbar(x, rate, yerr=[[rate - lo], [hi - rate]], color="black", capsize=2, lw=0.8)
-        paper = PAPER_FAILURE.get(algorithm)
+        paper = PAPER_FAILURE.get(algorithm) if variant == algorithm else None
         if paper is not None:
             ax.plot(i + 0.45, paper, marker="D", color="black", ms=6,
                     label="paper" if i == 0 else None)
         success = [r["final_error_m"] for r in g if r["localized"]]
         populations = sorted({str(r["population"]) for r in g})
         lines.append(
-            f"| {_label(algorithm)} | {', '.join(populations)} | "
+            f"| {label} | {', '.join(populations)} | "
             + " | ".join(f"{_pct(c[0])} (n = {c[3]})" for c in cells[:-1])
             + f" | {_pct(cells[-1][0])} ({_pct(cells[-1][1])}-{_pct(cells[-1][2])}), n = {cells[-1][3]} | "
             f"{_pct(paper) if paper is not None else '–'} | "
@@ -559,8 +559,9 @@ def _robustness(rows: list[dict], out: Path, reasons: dict) -> Section:
             ticks.append(i + (j - len(maps) / 2) * width)
             labels.append("all" if m is None else _MAP_SHORT.get(m, m))
     ax.set_xticks(ticks, labels, fontsize=7)
-    for i, algorithm in enumerate(order):
-        ax.text(i, -0.12, _label(algorithm), ha="center", va="top",
+    for i, variant in enumerate(order):
+        ax.text(i, -0.12, _variant_label(variant, by_algo[variant]).replace(" (", "\n("),
+                ha="center", va="top",
                 transform=ax.get_xaxis_transform())
     ax.set_ylabel("fraction of runs that fail to localize")
     ax.set_title("003 §V robustness (our runs): per map (light) and all (dark), 95 % CI")

@@ -459,9 +459,9 @@ def test_shipped_laser_specs_plan_the_papers_trial_counts():
     sizes = {name: len(plan(load_spec(name))) for name in
              ("laser-table3", "laser-kidnap", "laser-collab", "laser-robustness")}
     # 3 algorithms x 2 populations x 100; (3 + AMCL without recovery) x 100; 2 x 100;
-    # 3 algorithms x 2 maps x 250.
+    # (3 algorithms + AMCL without recovery) x 2 maps x 250.
     assert sizes == {"laser-table3": 600, "laser-kidnap": 400, "laser-collab": 200,
-                     "laser-robustness": 1500}
+                     "laser-robustness": 2000}
 
 
 def test_job_row_and_report(tmp_path):
@@ -555,3 +555,44 @@ def test_table3_spec_and_report_section(tmp_path):
     assert "up to the symmetry" not in text
     assert (tmp_path / "report" / "table3_floor.png").stat().st_size > 0
     assert "| 20 | MR-SSGA | 1 |" in text and "| 20 | AMCL | 1 |" in text
+
+
+def test_robustness_report_shows_a_named_variant_as_its_own_row(tmp_path):
+    """A robustness group named otherwise than its algorithm (amcl-no-recovery) gets a row of
+    its own, without the paper's figure, instead of being pooled with the plain algorithm."""
+    spec_path = tmp_path / "laser-robustness.toml"
+    spec_path.write_text(textwrap.dedent("""\
+        name = "laser-robustness"
+        family = "laser"
+        replications = 1
+        [[group]]
+        name = "amcl"
+        scenarios = ["laser-robust-office"]
+        [group.set]
+        "algorithm.name" = "amcl"
+        "algorithm.population" = 200
+        "world.steps" = 6
+        [[group]]
+        name = "amcl-no-recovery"
+        scenarios = ["laser-robust-office"]
+        [group.set]
+        "algorithm.name" = "amcl"
+        "algorithm.population" = 200
+        "algorithm.params.recovery" = false
+        "world.steps" = 6
+    """))
+    spec = load_spec(spec_path)
+    header = columns(spec)
+    results = tmp_path / "results.csv"
+    with results.open("w", newline="") as handle:
+        writer = csv.writer(handle)
+        writer.writerow(header)
+        for job in plan(spec):
+            writer.writerow(["" if v is None else v for v in row(spec, job, run_job(job))])
+    text = write_report([results], tmp_path / "report", command="test").read_text()
+    rows = [line for line in text.splitlines() if line.startswith("| AMCL")]
+    assert len(rows) == 2, rows
+    plain, variant = rows
+    assert plain.startswith("| AMCL | ") and "(n = 1)" in plain and "| 35 % |" in plain
+    assert variant.startswith("| AMCL (amcl-no-recovery) | ") and "(n = 1)" in variant
+    assert "| – |" in variant  # no paper figure for a variant the paper did not run
