@@ -440,18 +440,50 @@ def _kidnap(rows: list[dict], out: Path, reasons: dict) -> Section:
 
 # -- 003 fig. 4 -------------------------------------------------------------------------------
 
+#: 003 fig. 4 is run on this scenario; other scenarios of the laser-collab spec are our variants.
+_COLLAB_PAPER_SCENARIO = "laser-collab-three-rooms"
 
-def _collab(rows: list[dict], out: Path, reasons: dict) -> Section:
-    groups: dict[int, list[dict]] = defaultdict(list)
-    for r in rows:
-        groups[int(r["cooperative"])].append(r)
-    lines = [
-        ("Three robots start in the corridor of the three-rooms floor (`three_rooms_corridor`), "
+_COLLAB_INTRO = {
+    _COLLAB_PAPER_SCENARIO: (
+        "Three robots start in the corridor of the three-rooms floor (`three_rooms_corridor`), "
         "where the laser alone is ambiguous, and walk into the three rooms "
         "(`laser-collab-three-rooms.toml`); CFS-GA with 300 individuals, table I of 003 "
         "(communication range 4 m, line of sight). The same seeds for both, so both see the "
         "same paths and sensor noise."),
-        "",
+    "laser-collab-three-rooms-long-corridor": (
+        "**Long-corridor variant (ours, not in 003), to test reason (2) below.** The same floor, "
+        "robots and parameters, but each robot first walks the corridor back and forth for about "
+        "250 steps (22-24 m; some teammate within 4 m and in sight in about 230 of the first 250 "
+        "steps, against about 55 above) and only then enters its room, where it stops about 35 "
+        "steps later; 500 steps instead of 400 (`laser-collab-three-rooms-long-corridor.toml`). "
+        "The same seeds for both modes."),
+}
+
+
+def _collab_paired(coop: list[dict], auto: list[dict]) -> str:
+    """Per-seed comparison of the settling iterations of the two modes (same seed, same paths
+    and noise)."""
+    by_seed = {r["seed"]: r["settle_step"] for r in auto}
+    pairs = [(r["settle_step"], by_seed[r["seed"]]) for r in coop
+             if r["seed"] in by_seed and r["settle_step"] is not None
+             and by_seed[r["seed"]] is not None]
+    if not pairs:
+        return "Paired by seed: no seed where both modes settle."
+    gain = np.array([a - c for c, a in pairs])  # > 0: collaboration settles sooner
+    median = _fmt(float(np.median(gain)), 0)
+    return (f"Paired by seed: of the {len(pairs)} seeds where both modes settle, collaboration "
+            f"settles sooner in {int((gain > 0).sum())} and later in {int((gain < 0).sum())}, "
+            f"by {median} iteration{'' if median in ('1', '-1') else 's'} at the median "
+            "(autonomous minus collaborative).")
+
+
+def _collab_block(rows: list[dict], paper: bool, label: str, figure: Path, title: str
+                  ) -> tuple[list[str], list]:
+    """One scenario's table and figure: collaborative against autonomous."""
+    groups: dict[int, list[dict]] = defaultdict(list)
+    for r in rows:
+        groups[int(r["cooperative"])].append(r)
+    lines = [
         "| CFS-GA | n | all robots' mean curves under 15 cm from (iteration) | median curves | paper | runs where all robots settle | settling iteration per run, median (IQR) | final error, mean (m) |",
         "|---|---|---|---|---|---|---|---|",
     ]
@@ -471,7 +503,7 @@ def _collab(rows: list[dict], out: Path, reasons: dict) -> Section:
         settle_median = [settle_index(median[:, k]) for k in range(median.shape[1])]
         median_settle = None if any(s is None for s in settle_median) else max(settle_median)
         for k in range(mean.shape[1]):
-            curves.append((f"collab/{name}", str(k), mean[:, k], median[:, k], runs.shape[0]))
+            curves.append((f"{label}/{name}", str(k), mean[:, k], median[:, k], runs.shape[0]))
             colour = _ROBOT_COLOURS[k % len(_ROBOT_COLOURS)]
             ax.plot(mean[:, k], color=colour, lw=1.2, label=f"robot {k}, mean")
             ax.plot(median[:, k], color=colour, lw=0.8, ls="--",
@@ -486,19 +518,45 @@ def _collab(rows: list[dict], out: Path, reasons: dict) -> Section:
         iqr = (f"{int(np.median(per_run))} ({int(np.percentile(per_run, 25))}-"
                f"{int(np.percentile(per_run, 75))})") if per_run.size else "–"
         final = np.array([r["final_error_m"] for r in g])
+        cited = ("about 100" if coop else "almost 300") if paper else "–"
         lines.append(
             f"| {name} | {len(g)} | {all_settle if all_settle is not None else 'never (within the run)'} | "
             f"{median_settle if median_settle is not None else 'never'} | "
-            f"{'about 100' if coop else 'almost 300'} | {_pct(per_run.size / len(g))} | {iqr} | "
+            f"{cited} | {_pct(per_run.size / len(g))} | {iqr} | "
             f"{_fmt(final.mean())} |")
+    if not paper and groups.get(1) and groups.get(0):
+        lines += ["", _collab_paired(groups[1], groups[0])]
     axes[0][0].set_ylabel("position error, mean over runs (m)")
     axes[0][0].legend(fontsize=7, ncol=2)
-    fig.suptitle("003 fig. 4 (our runs): collaborative vs autonomous CFS-GA "
+    fig.suptitle(title)
+    _save(fig, figure)
+    return lines, curves
+
+
+def _collab(rows: list[dict], out: Path, reasons: dict) -> Section:
+    by_scenario: dict[str, list[dict]] = defaultdict(list)
+    for r in rows:
+        by_scenario[str(r["scenario"])].append(r)
+    order = sorted(by_scenario, key=lambda s: (s != _COLLAB_PAPER_SCENARIO, s))
+    lines: list[str] = []
+    curves: list = []
+    figures: list[str] = []
+    for scenario in order:
+        g = by_scenario[scenario]
+        paper = scenario == _COLLAB_PAPER_SCENARIO
+        figure = "fig4_collab.png" if paper else f"fig4_{scenario}.png"
+        title = ("003 fig. 4 (our runs): collaborative vs autonomous CFS-GA "
+                 "(solid: mean over runs, dashed: median)" if paper else
+                 f"{scenario} (our variant): collaborative vs autonomous CFS-GA "
                  "(solid: mean over runs, dashed: median)")
-    _save(fig, out / "fig4_collab.png")
+        label = "collab" if paper else str(g[0]["group"])
+        intro = _COLLAB_INTRO.get(scenario, f"Scenario `{scenario}.toml` (our variant, not in 003).")
+        block, block_curves = _collab_block(g, paper, label, out / figure, title)
+        lines += ([""] if lines else []) + [intro, "", *block]
+        curves += block_curves
+        figures.append(figure)
     lines += ["", f"**Difference and likely reason.** {reasons.get('fig4', DEFAULT_REASON)}"]
-    return Section("003 fig. 4: collaborative vs autonomous CFS-GA", lines, ["fig4_collab.png"],
-                   curves)
+    return Section("003 fig. 4: collaborative vs autonomous CFS-GA", lines, figures, curves)
 
 
 # -- 003 robustness ---------------------------------------------------------------------------
@@ -590,16 +648,17 @@ def _load_reasons(out: Path) -> dict[str, str]:
 
 
 def _cpu_lines(rows: list[dict]) -> list[str]:
-    groups: dict[tuple[str, str, str], list[dict]] = defaultdict(list)
+    # One line per run shape too: an experiment's scenarios may differ in robots or steps.
+    groups: dict[tuple[str, str, str, int, int], list[dict]] = defaultdict(list)
     for r in rows:
-        groups[(r["experiment"], r["algorithm"], str(r["population"]))].append(r)
+        groups[(r["experiment"], r["algorithm"], str(r["population"]), int(r["robots"]),
+                int(r["steps"]))].append(r)
     lines = ["| experiment | algorithm | population | runs | robots x steps | CPU per run, mean (s) | CPU per robot-step (ms) |",
              "|---|---|---|---|---|---|---|"]
-    for (exp, algo, pop), g in sorted(groups.items()):
+    for (exp, algo, pop, robots, steps), g in sorted(groups.items()):
         cpu = np.array([r["cpu_s"] for r in g])
-        robot_steps = g[0]["robots"] * g[0]["steps"]
-        lines.append(f"| {exp} | {_label(algo)} | {pop} | {len(g)} | {g[0]['robots']} x "
-                     f"{g[0]['steps']} | {cpu.mean():.2f} | {1000 * cpu.mean() / robot_steps:.2f} |")
+        lines.append(f"| {exp} | {_label(algo)} | {pop} | {len(g)} | {robots} x {steps} | "
+                     f"{cpu.mean():.2f} | {1000 * cpu.mean() / (robots * steps):.2f} |")
     total = sum(r["cpu_s"] for r in rows)
     lines += ["", (f"Total CPU of these runs: {total / 60:.1f} min ({total / 120:.1f} min of wall "
               f"time on 2 free cores).")]

@@ -458,9 +458,10 @@ def test_amcl_localizes_the_office_robot_before_the_kidnap():
 def test_shipped_laser_specs_plan_the_papers_trial_counts():
     sizes = {name: len(plan(load_spec(name))) for name in
              ("laser-table3", "laser-kidnap", "laser-collab", "laser-robustness")}
-    # 3 algorithms x 2 populations x 100; (3 + AMCL without recovery) x 100; 2 x 100;
+    # 3 algorithms x 2 populations x 100; (3 + AMCL without recovery) x 100;
+    # 2 modes x 2 scenarios (003's and the long corridor) x 100;
     # (3 algorithms + AMCL without recovery) x 2 maps x 250.
-    assert sizes == {"laser-table3": 600, "laser-kidnap": 400, "laser-collab": 200,
+    assert sizes == {"laser-table3": 600, "laser-kidnap": 400, "laser-collab": 400,
                      "laser-robustness": 2000}
 
 
@@ -596,3 +597,64 @@ def test_robustness_report_shows_a_named_variant_as_its_own_row(tmp_path):
     assert plain.startswith("| AMCL | ") and "(n = 1)" in plain and "| 35 % |" in plain
     assert variant.startswith("| AMCL (amcl-no-recovery) | ") and "(n = 1)" in variant
     assert "| – |" in variant  # no paper figure for a variant the paper did not run
+
+
+def test_collab_report_shows_one_block_per_scenario_with_a_paired_comparison(tmp_path):
+    """The fig. 4 section has a table and a figure for 003's scenario (with the paper's figures)
+    and one for the long-corridor variant (without them, with the per-seed comparison)."""
+    spec_path = tmp_path / "laser-collab.toml"
+    spec_path.write_text(textwrap.dedent("""\
+        name = "laser-collab"
+        family = "laser"
+        replications = 2
+        [[group]]
+        name = "collab"
+        scenarios = ["laser-collab-three-rooms"]
+        [group.grid]
+        "algorithm.cooperative" = [true, false]
+        [group.set]
+        "algorithm.population" = 30
+        "world.steps" = 6
+        [[group]]
+        name = "collab-long-corridor"
+        scenarios = ["laser-collab-three-rooms-long-corridor"]
+        [group.grid]
+        "algorithm.cooperative" = [true, false]
+        [group.set]
+        "algorithm.population" = 30
+        "world.steps" = 6
+    """))
+    spec = load_spec(spec_path)
+    header = columns(spec)
+    at = {name: header.index(name) for name in ("scenario", "cooperative", "seed", "settle_step")}
+    # Settling steps set by hand for the variant, (seed, collaborative) -> step: collaboration
+    # is 4 steps sooner on seed 1 and 2 steps later on seed 2, so the median gain is 1; per mode
+    # the steps are {3, 6} and {7, 4}: medians 4.5 and 5.5, quartiles (linear) 3.75-5.25 and
+    # 4.75-6.25, shown truncated.
+    settle = {(1, True): 3, (1, False): 7, (2, True): 6, (2, False): 4}
+    results = tmp_path / "results.csv"
+    with results.open("w", newline="") as handle:
+        writer = csv.writer(handle)
+        writer.writerow(header)
+        for job in plan(spec):
+            line = row(spec, job, run_job(job))
+            if line[at["scenario"]] == "laser-collab-three-rooms-long-corridor":
+                line[at["settle_step"]] = settle[(int(line[at["seed"]]),
+                                                  bool(int(line[at["cooperative"]])))]
+            writer.writerow(["" if v is None else v for v in line])
+    text = write_report([results], tmp_path / "report", command="test").read_text()
+    section = text.split("## 003 fig. 4")[1].split("\n## ")[0]
+    assert section.index("`laser-collab-three-rooms.toml`") < section.index(
+        "`laser-collab-three-rooms-long-corridor.toml`")
+    rows = [line for line in section.splitlines()
+            if line.startswith(("| collaborative", "| autonomous"))]
+    assert len(rows) == 4, rows
+    assert "| about 100 |" in rows[0] and "| almost 300 |" in rows[1]
+    assert all("| 2 |" in r and "| – |" in r for r in rows[2:])  # no paper figure for ours
+    assert "| 100 % | 4 (3-5) |" in rows[2] and "| 100 % | 5 (4-6) |" in rows[3]
+    assert section.count("Paired by seed") == 1
+    assert ("of the 2 seeds where both modes settle, collaboration settles sooner in 1 and "
+            "later in 1, by 1 iteration at the median") in section
+    for figure in ("fig4_collab.png", "fig4_laser-collab-three-rooms-long-corridor.png"):
+        assert f"![{figure}]({figure})" in section
+        assert (tmp_path / "report" / figure).stat().st_size > 0
