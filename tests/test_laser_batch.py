@@ -502,6 +502,23 @@ def test_job_row_and_report(tmp_path):
     assert ALGORITHMS.get("amcl").label == "AMCL"
 
 
+def _report_of_spec(spec_path, tmp_path, edit=None) -> str:
+    """Run every job of the spec at ``spec_path`` in process, write the rows (``edit(header,
+    line)`` may change a row first) and return the text of the report written from them."""
+    spec = load_spec(spec_path)
+    header = columns(spec)
+    results = tmp_path / "results.csv"
+    with results.open("w", newline="") as handle:
+        writer = csv.writer(handle)
+        writer.writerow(header)
+        for job in plan(spec):
+            line = row(spec, job, run_job(job))
+            if edit is not None:
+                edit(header, line)
+            writer.writerow(["" if v is None else v for v in line])
+    return write_report([results], tmp_path / "report", command="test").read_text()
+
+
 def test_table3_indexes_by_hand():
     # Over trials of each trial's final team error: min, max, mean.
     assert table3_indexes([0.3, 0.1, 0.2, 0.6]) == pytest.approx((0.1, 0.6, 0.3))
@@ -542,15 +559,7 @@ def test_table3_spec_and_report_section(tmp_path):
         "algorithm.population" = 20
         "world.steps" = 8
     """))
-    spec = load_spec(spec_path)
-    header = columns(spec)
-    results = tmp_path / "results.csv"
-    with results.open("w", newline="") as handle:
-        writer = csv.writer(handle)
-        writer.writerow(header)
-        for job in plan(spec):
-            writer.writerow(["" if v is None else v for v in row(spec, job, run_job(job))])
-    text = write_report([results], tmp_path / "report", command="test").read_text()
+    text = _report_of_spec(spec_path, tmp_path)
     assert "`aliased_rooms`" in text and "laser-table3-aliased-rooms.toml" in text
     assert "What the indexes are over" in text
     assert "up to the symmetry" not in text
@@ -582,15 +591,7 @@ def test_robustness_report_shows_a_named_variant_as_its_own_row(tmp_path):
         "algorithm.params.recovery" = false
         "world.steps" = 6
     """))
-    spec = load_spec(spec_path)
-    header = columns(spec)
-    results = tmp_path / "results.csv"
-    with results.open("w", newline="") as handle:
-        writer = csv.writer(handle)
-        writer.writerow(header)
-        for job in plan(spec):
-            writer.writerow(["" if v is None else v for v in row(spec, job, run_job(job))])
-    text = write_report([results], tmp_path / "report", command="test").read_text()
+    text = _report_of_spec(spec_path, tmp_path)
     rows = [line for line in text.splitlines() if line.startswith("| AMCL")]
     assert len(rows) == 2, rows
     plain, variant = rows
@@ -624,25 +625,18 @@ def test_collab_report_shows_one_block_per_scenario_with_a_paired_comparison(tmp
         "algorithm.population" = 30
         "world.steps" = 6
     """))
-    spec = load_spec(spec_path)
-    header = columns(spec)
-    at = {name: header.index(name) for name in ("scenario", "cooperative", "seed", "settle_step")}
     # Settling steps set by hand for the variant, (seed, collaborative) -> step: collaboration
     # is 4 steps sooner on seed 1 and 2 steps later on seed 2, so the median gain is 1; per mode
     # the steps are {3, 6} and {7, 4}: medians 4.5 and 5.5, quartiles (linear) 3.75-5.25 and
     # 4.75-6.25, shown truncated.
     settle = {(1, True): 3, (1, False): 7, (2, True): 6, (2, False): 4}
-    results = tmp_path / "results.csv"
-    with results.open("w", newline="") as handle:
-        writer = csv.writer(handle)
-        writer.writerow(header)
-        for job in plan(spec):
-            line = row(spec, job, run_job(job))
-            if line[at["scenario"]] == "laser-collab-three-rooms-long-corridor":
-                line[at["settle_step"]] = settle[(int(line[at["seed"]]),
-                                                  bool(int(line[at["cooperative"]])))]
-            writer.writerow(["" if v is None else v for v in line])
-    text = write_report([results], tmp_path / "report", command="test").read_text()
+
+    def set_settling(header, line):
+        at = {name: header.index(name) for name in ("scenario", "cooperative", "seed", "settle_step")}
+        if line[at["scenario"]] == "laser-collab-three-rooms-long-corridor":
+            line[at["settle_step"]] = settle[(int(line[at["seed"]]), bool(int(line[at["cooperative"]])))]
+
+    text = _report_of_spec(spec_path, tmp_path, set_settling)
     section = text.split("## 003 fig. 4")[1].split("\n## ")[0]
     assert section.index("`laser-collab-three-rooms.toml`") < section.index(
         "`laser-collab-three-rooms-long-corridor.toml`")
