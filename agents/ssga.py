@@ -682,8 +682,9 @@ class GeneticLocalizer:
         self.population = self._reproduce(self.population, self.fitness, peak)
         # The elite: the best individual, copied unchanged by reproduction (MR-SSGA's mating
         # rules never replace it; the simple GA copies its elites); eq. 3 moves it noise-free.
-        kept = np.flatnonzero(np.all(self.population == self._best, axis=1))
-        self._elite = int(kept[0]) if kept.size else None
+        if self.params.elite_exact_motion:
+            kept = np.flatnonzero(np.all(self.population == self._best, axis=1))
+            self._elite = int(kept[0]) if kept.size else None
         self._last_ranges = ranges
         self._step = obs.step
 
@@ -724,11 +725,7 @@ class GeneticLocalizer:
         model's standard deviations; with ``elite_exact_motion``, none for the last step's best
         individual (see the module docstring). One ``rng.normal`` draw ``(N, 2)`` in every case."""
         noise = self.rng.normal(0.0, 1.0, size=(poses_m.shape[0], 2)) * self._motion_std
-        if (
-            self.params.elite_exact_motion
-            and self._elite is not None
-            and self._elite < noise.shape[0]
-        ):
+        if self._elite is not None and self._elite < noise.shape[0]:  # elite_exact_motion
             noise[self._elite] = 0.0
         self._odometry = (float(delta_s_m), float(delta_phi_rad))
         return unicycle_model(poses_m, delta_s_m + noise[:, 0], delta_phi_rad + noise[:, 1])
