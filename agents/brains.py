@@ -109,6 +109,22 @@ class ForagingAgent:
         )
 
 
+class StandstillAgent:
+    """A transport benchmark's stand-in for an e-puck brain (``swarmloc agent --null-brain``):
+    answers every Sense at once with an Act that holds the wheels still and sends nothing. The
+    shell still decodes each Sense and encodes each Act, so a swarm of these measures what an
+    agent process costs without its brain (benchmarks/bench_lockstep.py --null-brain)."""
+
+    sense_type = EpuckSense
+
+    def __init__(self, robot_id: int) -> None:
+        self.robot_id = robot_id
+
+    def act(self, sense: EpuckSense, errors: ErrorCounter) -> EpuckAct:
+        return EpuckAct(tick=sense.tick, robot_id=self.robot_id, wheel_speed_steps_s=(0.0, 0.0),
+                        payload=None, state=0, pose_estimate=(0.0, 0.0, 0.0))
+
+
 #: family name -> "module:callable" building an AgentBrain from the world's Welcome and the
 #: family's scenario object parsed from it.
 FAMILIES: dict[str, str] = {
@@ -119,14 +135,22 @@ FAMILIES: dict[str, str] = {
 }
 
 
-def brain_from_welcome(welcome: Welcome) -> AgentBrain:
-    """The brain the world's scenario asks for; BrainError names what is unusable."""
+def brain_from_welcome(welcome: Welcome, *, null_brain: bool = False) -> AgentBrain:
+    """The brain the world's scenario asks for; BrainError names what is unusable.
+
+    ``null_brain``: a :class:`StandstillAgent` instead (e-puck scenarios only), for transport
+    benchmarks."""
     from swarmloc.deploy.scenario import scenario_from_dict
 
     try:
         loaded = scenario_from_dict(welcome.scenario)
     except (ConfigError, TypeError, ValueError) as exc:
         raise BrainError(f"the world's scenario is not usable: {exc}") from None
+    if null_brain:
+        if loaded.family != "foraging":
+            raise BrainError(f"--null-brain stands in for e-puck brains only, not for the "
+                             f"{loaded.family!r} family")
+        return StandstillAgent(welcome.robot_id)
     module, _, path = FAMILIES[loaded.family].partition(":")
     obj: Any = importlib.import_module(module)
     for part in path.split("."):

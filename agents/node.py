@@ -156,11 +156,13 @@ def run_agent(
     join_timeout_s: float = 120.0,
     world_timeout_s: float = 300.0,
     world_grace_s: float = 10.0,
+    null_brain: bool = False,
 ) -> int:
-    """Run one agent to the end of the run; returns a process exit code."""
+    """Run one agent to the end of the run; returns a process exit code. ``null_brain``: answer
+    with a standstill Act instead of running the brain (transport benchmarks)."""
     try:
         welcome = join(session, keys, robot_id, join_timeout_s, stop)
-        brain = brain_from_welcome(welcome)
+        brain = brain_from_welcome(welcome, null_brain=null_brain)
     except (JoinError, BrainError, ProtocolError) as exc:
         if stop.is_set():
             log.info("robot %d: stopped before joining", robot_id)

@@ -5,10 +5,13 @@ ticks per second and the tick time percentiles the world-server measured. With `
 each swarmloc run is paired with a run of the plain-Zenoh floor of the same size
 (benchmarks/bench_zenoh_floor.py: a lockstep world and N robots that answer at once, no swarmloc
 code), alternating ``--repeat`` times, so that both see the same machine in the same minutes; it
-prints each pair and swarmloc's rate as a share of the floor's. Usage:
+prints each pair and swarmloc's rate as a share of the floor's. ``--null-brain`` runs agents that
+answer each Sense with a standstill Act (`swarmloc run --null-brains`): what an agent process
+costs without its brain. Usage:
 
     python benchmarks/bench_lockstep.py [--robots 10 50 100] [--duration-s 30] [--realtime]
     python benchmarks/bench_lockstep.py --robots 100 --with-floor --repeat 3
+    python benchmarks/bench_lockstep.py --robots 100 --null-brain
 """
 
 from __future__ import annotations
@@ -24,13 +27,16 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 
 
-def swarmloc_run(n: int, scenario: str, duration_s: float, realtime: bool, tmp: str) -> dict | str:
+def swarmloc_run(n: int, scenario: str, duration_s: float, realtime: bool, tmp: str,
+                 null_brain: bool = False) -> dict | str:
     """One `swarmloc run`; its transport figures, or the error text if it failed."""
     run = f"bench{n}"
     cmd = [sys.executable, "-m", "swarmloc", "run", scenario, "--robots", str(n),
            "--duration-s", str(duration_s), "--out", tmp, "--run", run, "--quiet"]
     if realtime:
         cmd.append("--realtime")
+    if null_brain:
+        cmd.append("--null-brains")
     proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
     if proc.returncode != 0:
         return proc.stderr.strip()[-300:]
@@ -47,6 +53,8 @@ def main() -> int:
                         help="pair each run with a plain-Zenoh floor run of the same size")
     parser.add_argument("--repeat", type=int, default=1, help="runs per size (alternating with the floor)")
     parser.add_argument("--floor-s", type=float, default=15.0, help="wall seconds of each floor run")
+    parser.add_argument("--null-brain", action="store_true",
+                        help="agents answer with a standstill Act instead of running their brains")
     args = parser.parse_args()
     if args.with_floor and args.realtime:
         parser.error("--with-floor compares lockstep rates; drop --realtime")
@@ -54,19 +62,19 @@ def main() -> int:
     if args.with_floor:
         sys.path.insert(0, str(HERE))
         from bench_zenoh_floor import world as floor_world
-    mode = "realtime" if args.realtime else "lockstep"
-    head = f"{'robots':>6} {'mode':>9} {'ticks':>6} {'ticks/s':>8} {'p50 ms':>7} {'p99 ms':>7} {'late':>5} {'overruns':>8}"
+    mode = ("realtime" if args.realtime else "lockstep") + ("/null" if args.null_brain else "")
+    head = f"{'robots':>6} {'mode':>13} {'ticks':>6} {'ticks/s':>8} {'p50 ms':>7} {'p99 ms':>7} {'late':>5} {'overruns':>8}"
     print(head + (f" {'floor ticks/s':>13} {'share':>6}" if args.with_floor else ""))
     with tempfile.TemporaryDirectory() as tmp:
         for n in args.robots:
             shares = []
             for _ in range(args.repeat):
                 floor = floor_world(n, args.floor_s, "direct") if floor_world else None
-                t = swarmloc_run(n, args.scenario, args.duration_s, args.realtime, tmp)
+                t = swarmloc_run(n, args.scenario, args.duration_s, args.realtime, tmp, args.null_brain)
                 if isinstance(t, str):
                     print(f"{n:>6} failed: {t}")
                     continue
-                line = (f"{n:>6} {mode:>9} {t['ticks']:>6} {t['ticks_per_s']:>8} {t['tick_ms_p50']:>7} "
+                line = (f"{n:>6} {mode:>13} {t['ticks']:>6} {t['ticks_per_s']:>8} {t['tick_ms_p50']:>7} "
                         f"{t['tick_ms_p99']:>7} {t['late_acts']:>5} {t['overruns']:>8}")
                 if floor is not None:
                     shares.append(t["ticks_per_s"] / floor["ticks_per_s"])

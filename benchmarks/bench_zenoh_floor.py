@@ -9,9 +9,11 @@ answers, then starts the next tick. Congestion control BLOCK on both sides, mult
 Two topologies: ``direct`` (the world's session is a router and the robots connect straight to
 it, as ``swarmloc run`` does) and ``router`` (a separate Python router process in between, as
 ZENOH.md's pieces on several hosts). Compare the figures with `benchmarks/bench_lockstep.py`, the
-same swarm sizes with the real world-server and e-puck agents. Usage:
+same swarm sizes with the real world-server and e-puck agents. ``--codec`` adds swarmloc's codec
+and nothing else: each robot also decodes an e-puck Sense of 389 bytes (two received
+messages; a recorded ES3 Sense averages 312 bytes) and builds and encodes an Act, every tick. Usage:
 
-    python benchmarks/bench_zenoh_floor.py [--robots 10 50 100] [--duration-s 20] [--topology direct]
+    python benchmarks/bench_zenoh_floor.py [--robots 10 50 100] [--duration-s 20] [--topology direct] [--codec]
 """
 
 from __future__ import annotations
@@ -56,8 +58,25 @@ def _cpu_s() -> float:
     return r.ru_utime + r.ru_stime
 
 
-def robot(endpoint: str, run: str, robot_id: int) -> int:
-    """One robot: answer every sense at once with 100 bytes, until the world says the end."""
+def _sense_bytes(robot_id: int) -> bytes:
+    """An encoded e-puck Sense of 389 bytes: eight IR and three ground readings, two messages
+    heard (a recorded ES3 Sense averages 312 bytes)."""
+    from swarmloc.protocol.messages import EpuckSense, RabMessage, encode
+
+    heard = tuple(RabMessage(sender_id=i, range_m=0.1 + 0.01 * i, bearing_rad=0.5 * i - 1.0,
+                             payload=bytes(range(40))) for i in range(2))
+    return encode(EpuckSense(tick=1, robot_id=robot_id, encoder_steps=(12.0, 13.0),
+                             ir=tuple(0.1 * k for k in range(8)), ground=(0.9, 0.9, 0.9),
+                             received=heard))
+
+
+def robot(endpoint: str, run: str, robot_id: int, codec: bool = False) -> int:
+    """One robot: answer every sense at once with 100 bytes, until the world says the end;
+    with ``codec``, also decode a Sense and encode an Act each time."""
+    if codec:
+        from swarmloc.protocol.messages import EpuckAct, EpuckSense, decode, encode
+
+        sense_bytes = _sense_bytes(robot_id)
     done = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: done.set())
     with zenoh.open(_config("client", connect=endpoint)) as session:
@@ -70,6 +89,10 @@ def robot(endpoint: str, run: str, robot_id: int) -> int:
             if not cpu["ticks"]:
                 cpu["first"] = _cpu_s()
             cpu["ticks"] += 1
+            if codec:
+                sense = decode(sense_bytes, EpuckSense)
+                encode(EpuckAct(tick=sense.tick, robot_id=robot_id, wheel_speed_steps_s=(0.0, 0.0),
+                                payload=None, state=0, pose_estimate=(0.0, 0.0, 0.0)))
             answer[:8] = sample.payload.to_bytes()[:8]  # echo the tick number
             pub.put(bytes(answer))
 
@@ -85,7 +108,7 @@ def robot(endpoint: str, run: str, robot_id: int) -> int:
     return 0
 
 
-def world(n: int, duration_s: float, topology: str) -> dict:
+def world(n: int, duration_s: float, topology: str, codec: bool = False) -> dict:
     run = f"r{os.getpid()}x{n}"
     procs: list[subprocess.Popen] = []
     try:
@@ -109,7 +132,8 @@ def world(n: int, duration_s: float, topology: str) -> dict:
 
             live = session.liveliness().declare_subscriber(f"floor/{run}/alive/*", on_alive, history=True)
             robots = [subprocess.Popen([sys.executable, __file__, "--robot", str(i), "--connect", robot_ep,
-                                        "--run", run], start_new_session=True, stdout=subprocess.PIPE, text=True)
+                                        "--run", run, *(["--codec"] if codec else [])],
+                                       start_new_session=True, stdout=subprocess.PIPE, text=True)
                       for i in range(n)]
             procs.extend(robots)
             if not joined.wait(120):
@@ -186,15 +210,18 @@ def main() -> int:
     parser.add_argument("--connect", help=argparse.SUPPRESS)
     parser.add_argument("--run", help=argparse.SUPPRESS)
     parser.add_argument("--serve-router", help=argparse.SUPPRESS)
+    parser.add_argument("--codec", action="store_true",
+                        help="robots also decode an e-puck Sense and encode an Act every tick")
     args = parser.parse_args()
     if args.serve_router:
         return serve_router(args.serve_router)
     if args.robot is not None:
-        return robot(args.connect, args.run, args.robot)
-    print(f"plain Zenoh lockstep floor, topology {args.topology}, {PAYLOAD_BYTES}-byte messages")
+        return robot(args.connect, args.run, args.robot, args.codec)
+    print(f"plain Zenoh lockstep floor, topology {args.topology}, {PAYLOAD_BYTES}-byte messages"
+          + (", robots decode a Sense and encode an Act" if args.codec else ""))
     print(f"{'robots':>6} {'ticks':>6} {'ticks/s':>8} {'p50 ms':>7} {'p99 ms':>7} {'world CPU ms/tick':>18} {'robot CPU us/tick':>18}")
     for n in args.robots:
-        r = world(n, args.duration_s, args.topology)
+        r = world(n, args.duration_s, args.topology, args.codec)
         print(f"{r['robots']:>6} {r['ticks']:>6} {r['ticks_per_s']:>8.1f} {r['p50_ms']:>7.2f} {r['p99_ms']:>7.2f} "
               f"{r['world_cpu_ms_per_tick']:>18.2f} {r['robot_cpu_us_per_tick']:>18.0f}", flush=True)
     return 0

@@ -200,7 +200,8 @@ def main_agent(args) -> int:
         os.nice(args.nice)
     with open_session(config_from_args(args)) as session:
         return run_agent(session, keys, args.robot, stop, join_timeout_s=args.join_timeout_s,
-                         world_timeout_s=args.world_timeout_s, world_grace_s=args.world_grace_s)
+                         world_timeout_s=args.world_timeout_s, world_grace_s=args.world_grace_s,
+                         null_brain=args.null_brain)
 
 
 def main_batch(args) -> int:
@@ -225,7 +226,7 @@ def main_run(args) -> int:
 
     scenario = load_from_args(args, any_family=True)
     return run_local(scenario, run_name=args.run, out_root=Path(args.out), realtime=args.realtime,
-                     quiet=args.quiet, join_timeout_s=args.join_timeout_s)
+                     quiet=args.quiet, join_timeout_s=args.join_timeout_s, null_brains=args.null_brains)
 
 
 def main_laser_experiment(args) -> int:
@@ -263,6 +264,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--realtime", action="store_true", help="tick on the wall clock instead of lockstep")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--join-timeout-s", type=float, default=180.0)
+    p.add_argument("--null-brains", action="store_true",
+                   help="transport benchmark: e-puck agents answer each Sense with a standstill Act "
+                        "instead of running their brains")
     p.set_defaults(func=main_run)
 
     p = sub.add_parser("world", help="run the world-server")
@@ -291,6 +295,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--nice", type=int, default=0, choices=range(20), metavar="0..19",
                    help="lower this agent's CPU priority: on a machine with fewer cores than agents, "
                         "the world-server (the lockstep's serial part) then runs first")
+    p.add_argument("--null-brain", action="store_true",
+                   help="transport benchmark: answer each Sense with a standstill Act instead of "
+                        "running the brain (e-puck scenarios)")
     p.set_defaults(func=main_agent)
 
     p = sub.add_parser("router", help="run a Zenoh router (no zenohd needed)")

@@ -79,7 +79,8 @@ class LocalSwarm:
 
 def start_swarm(sup: Supervisor, scenario_file: Path, *, run: str, robots: int, out: Path,
                 log_dir: Path, realtime: bool = False, join_timeout_s: float = 180.0,
-                world_args: tuple[str, ...] = (), agent_nice: int | None = None) -> LocalSwarm:
+                world_args: tuple[str, ...] = (), agent_nice: int | None = None,
+                agent_args: tuple[str, ...] = ()) -> LocalSwarm:
     """Start a router, the world-server and ``robots`` agents under ``sup``.
 
     The world's own session is a router that the agents reach directly (one hop less for each of
@@ -101,7 +102,7 @@ def start_swarm(sup: Supervisor, scenario_file: Path, *, run: str, robots: int, 
     world, world_endpoint = start_announcing(sup, args, log_path=log_dir / "world.log")
     agents = [
         sup.start(["agent", "--robot", str(i), "-m", "client", "-e", world_endpoint, "--run", run,
-                   "--join-timeout-s", str(join_timeout_s), "--nice", str(agent_nice)],
+                   "--join-timeout-s", str(join_timeout_s), "--nice", str(agent_nice), *agent_args],
                   log_path=log_dir / f"agent-{i}.log")
         for i in range(robots)
     ]
@@ -122,7 +123,7 @@ def print_metrics(summary: dict) -> None:
 
 
 def run_local(scenario: AnyScenario, *, run_name: str | None, out_root: Path, realtime: bool,
-              quiet: bool, join_timeout_s: float = 180.0) -> int:
+              quiet: bool, join_timeout_s: float = 180.0, null_brains: bool = False) -> int:
     run = run_name or f"{scenario.name}-{scenario.label}-s{scenario.seed}-{secrets.token_hex(3)}".replace(".", "_")
     out = out_root / run
     out.mkdir(parents=True, exist_ok=True)
@@ -141,7 +142,8 @@ def run_local(scenario: AnyScenario, *, run_name: str | None, out_root: Path, re
     signal.signal(signal.SIGTERM, terminated)
     with supervised() as sup:
         swarm = start_swarm(sup, scenario_file, run=run, robots=scenario.robots, out=out,
-                            log_dir=log_dir, realtime=realtime, join_timeout_s=join_timeout_s)
+                            log_dir=log_dir, realtime=realtime, join_timeout_s=join_timeout_s,
+                            agent_args=("--null-brain",) if null_brains else ())
         say(f"router on {swarm.router_endpoint}; run '{run}': {scenario.robots} {scenario.family} robots, "
             f"{scenario.label}, seed {scenario.seed}, {scenario.n_ticks} ticks "
             f"({'real time' if realtime else 'lockstep'})")

@@ -594,3 +594,25 @@ def test_two_robots_exchange_the_nest_exactly_through_the_world(strategy):
     assert 1 <= round(k) < learned_at
     # A wandering robot recruited to a goal heads for it (seed 000 §6.1.1).
     assert brain.target[1] == NEST
+
+
+def test_null_brain_answers_each_sense_with_a_standstill_act_and_only_for_epucks():
+    """`swarmloc agent --null-brain` (transport benchmarks): the Act keeps the Sense's tick and
+    the robot's id, holds the wheels still and sends nothing, where the real brain drives."""
+    from swarmloc.agents.brains import BrainError, brain_from_welcome
+    from swarmloc.deploy.scenario import load_any
+    from swarmloc.protocol.errors import ErrorCounter
+    from swarmloc.protocol.messages import EpuckSense, Welcome
+
+    es1 = load_any("ES1", {"seed": 3}).to_dict()
+    welcome = Welcome(robot_id=2, run="unit", seed=3, scenario=es1)
+    sense = EpuckSense(tick=17, robot_id=2, encoder_steps=(0.0, 0.0), ir=(0.0,) * 8,
+                       ground=(1.0, 1.0, 1.0), received=())
+    real = brain_from_welcome(welcome).act(sense, ErrorCounter())
+    assert any(v != 0.0 for v in real.wheel_speed_steps_s)  # the brain would drive off
+    null = brain_from_welcome(welcome, null_brain=True).act(sense, ErrorCounter())
+    assert (null.tick, null.robot_id) == (17, 2)
+    assert null.wheel_speed_steps_s == (0.0, 0.0) and null.payload is None
+    vision = load_any("vision-exp1", {"seed": 2}).to_dict()
+    with pytest.raises(BrainError, match="--null-brain"):
+        brain_from_welcome(Welcome(robot_id=0, run="unit", seed=2, scenario=vision), null_brain=True)
