@@ -225,6 +225,9 @@ def main_run(args) -> int:
     from swarmloc.deploy.run import run_local
 
     scenario = load_from_args(args, any_family=True)
+    if args.null_brains and scenario.family != "foraging":
+        raise ConfigError(f"--null-brains stands in for e-puck brains only; scenario "
+                          f"'{scenario.name}' is a {scenario.family} scenario")
     return run_local(scenario, run_name=args.run, out_root=Path(args.out), realtime=args.realtime,
                      quiet=args.quiet, join_timeout_s=args.join_timeout_s, null_brains=args.null_brains)
 

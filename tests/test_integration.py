@@ -231,6 +231,16 @@ def test_bad_option_stops_before_anything_starts(tmp_path):
     assert not any(tmp_path.iterdir()), "no run folder for a refused run"
 
 
+def test_null_brains_for_a_family_without_them_stops_before_anything_starts(tmp_path):
+    proc = subprocess.run(
+        [sys.executable, "-m", "swarmloc", "run", "vision-exp1", "--null-brains", "--out", str(tmp_path)],
+        capture_output=True, text=True, timeout=60, check=False,
+    )
+    assert proc.returncode == 2
+    assert "--null-brains" in proc.stderr and "vision" in proc.stderr
+    assert not any(tmp_path.iterdir()), "no run folder for a refused run"
+
+
 def _children(parent: int) -> list[int]:
     """Processes whose parent is ``parent`` (from /proc)."""
     pids = []
