@@ -221,23 +221,17 @@ def test_swarmloc_run_command_end_to_end(tmp_path):
     assert saved["world"]["robots"] == 3 and result["seed"] == saved["world"]["seed"]
 
 
-def test_bad_option_stops_before_anything_starts(tmp_path):
+@pytest.mark.parametrize(("args", "named"), [
+    (["--set", "world.robts=3"], ["world.robts", "robots"]),  # a misspelt key
+    (["vision-exp1", "--null-brains"], ["--null-brains", "vision"]),  # e-puck agents only
+])
+def test_bad_option_stops_before_anything_starts(tmp_path, args, named):
     proc = subprocess.run(
-        [sys.executable, "-m", "swarmloc", "run", "--set", "world.robts=3", "--out", str(tmp_path)],
+        [sys.executable, "-m", "swarmloc", "run", *args, "--out", str(tmp_path)],
         capture_output=True, text=True, timeout=60, check=False,
     )
     assert proc.returncode == 2
-    assert "world.robts" in proc.stderr and "robots" in proc.stderr
-    assert not any(tmp_path.iterdir()), "no run folder for a refused run"
-
-
-def test_null_brains_for_a_family_without_them_stops_before_anything_starts(tmp_path):
-    proc = subprocess.run(
-        [sys.executable, "-m", "swarmloc", "run", "vision-exp1", "--null-brains", "--out", str(tmp_path)],
-        capture_output=True, text=True, timeout=60, check=False,
-    )
-    assert proc.returncode == 2
-    assert "--null-brains" in proc.stderr and "vision" in proc.stderr
+    assert all(word in proc.stderr for word in named), proc.stderr
     assert not any(tmp_path.iterdir()), "no run folder for a refused run"
 
 
