@@ -25,9 +25,18 @@ PYTHON = [sys.executable, "-m", "swarmloc"]
 #: spinning cost 25 % of the tick rate at 10 robots (163 -> 219 ticks/s measured).
 CHILD_ENV = {"PYTHONUNBUFFERED": "1", "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1",
              "MKL_NUM_THREADS": "1"}
-# Zenoh's own thread pools stay at their defaults. Handing every pool over to one worker thread
-# (ZENOH_RUNTIME) was faster (100 agents 20 -> 23 ticks/s) but a single 300 KB message then stalled
-# that thread past the link lease: the world lost every agent's liveliness and the run changed.
+#: Zenoh's async pools (rx, tx, net, acc) handed over to one worker thread of its app pool, as
+#: the ``ZENOH_RUNTIME`` variable that Zenoh reads when a process opens its first session. Local
+#: e-puck agents run on it (deploy/run.py: start_swarm): an agent sends and receives two small
+#: messages a tick, and with a hundred of them on two cores the hand-overs between Zenoh's default
+#: pools cost more than they save (100 agents of ES3: 37.1 -> 39.4 ticks/s, three pairs of
+#: 600-tick runs). Other pieces keep the defaults: on one thread a single 300 KB message (a vision
+#: image) stalled that thread past the link lease, and the world lost every agent's liveliness;
+#: the world-server itself gains nothing measurable from it. A ZENOH_RUNTIME set by the user wins.
+ONE_THREAD_ZENOH_RUNTIME = (
+    "(rx: (handover: app), net: (handover: app), acc: (handover: app), tx: (handover: app), "
+    "app: (worker_threads: 1))"
+)
 
 
 @dataclass
@@ -36,9 +45,11 @@ class Supervisor:
 
     procs: list[subprocess.Popen] = field(default_factory=list)
 
-    def start(self, args: list[str], *, log_path: Path | None = None, stdout=None) -> subprocess.Popen:
+    def start(self, args: list[str], *, log_path: Path | None = None, stdout=None,
+              env: dict[str, str] | None = None) -> subprocess.Popen:
         """Start ``swarmloc ARGS`` in its own process group. Its stderr (and its stdout unless
-        ``stdout`` is given, e.g. ``subprocess.PIPE``) goes to ``log_path``, else nowhere."""
+        ``stdout`` is given, e.g. ``subprocess.PIPE``) goes to ``log_path``, else nowhere.
+        ``env``: defaults for the child's environment, under ours (ours wins)."""
         # The child inherits the descriptor; ours is closed right after the start.
         log = open(log_path, "ab") if log_path else None  # noqa: SIM115
         sink = log if log is not None else subprocess.DEVNULL
@@ -49,7 +60,7 @@ class Supervisor:
                 stderr=sink,
                 stdin=subprocess.DEVNULL,
                 start_new_session=True,
-                env={**os.environ, **CHILD_ENV},
+                env={**(env or {}), **os.environ, **CHILD_ENV},
             )
         finally:
             if log is not None:

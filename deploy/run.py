@@ -18,8 +18,14 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from swarmloc.deploy.launch import Supervisor, start_announcing, start_router, supervised
-from swarmloc.deploy.scenario import AnyScenario
+from swarmloc.deploy.launch import (
+    ONE_THREAD_ZENOH_RUNTIME,
+    Supervisor,
+    start_announcing,
+    start_router,
+    supervised,
+)
+from swarmloc.deploy.scenario import AnyScenario, family_of, scenario_data
 
 
 def _progress_follower(endpoint: str, run: str, total_ticks: int, quiet: bool):
@@ -89,7 +95,8 @@ def start_swarm(sup: Supervisor, scenario_file: Path, *, run: str, robots: int, 
 
     With more agents than cores, agents run at a lower CPU priority (``agent_nice``, default 5
     then): the world-server is the serial part of every lockstep tick, and an agent that preempts
-    it delays all the others.
+    it delays all the others. E-puck agents run Zenoh on one thread (launch.py:
+    ONE_THREAD_ZENOH_RUNTIME).
     """
     if agent_nice is None:
         agent_nice = 5 if robots > (os.cpu_count() or 1) else 0
@@ -100,10 +107,12 @@ def start_swarm(sup: Supervisor, scenario_file: Path, *, run: str, robots: int, 
     if realtime:
         args.append("--realtime")
     world, world_endpoint = start_announcing(sup, args, log_path=log_dir / "world.log")
+    foraging = family_of(scenario_data(str(scenario_file))) == "foraging"
+    agent_env = {"ZENOH_RUNTIME": ONE_THREAD_ZENOH_RUNTIME} if foraging else None
     agents = [
         sup.start(["agent", "--robot", str(i), "-m", "client", "-e", world_endpoint, "--run", run,
                    "--join-timeout-s", str(join_timeout_s), "--nice", str(agent_nice), *agent_args],
-                  log_path=log_dir / f"agent-{i}.log")
+                  log_path=log_dir / f"agent-{i}.log", env=agent_env)
         for i in range(robots)
     ]
     return LocalSwarm(endpoint, world, world_endpoint, agents)

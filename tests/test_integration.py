@@ -20,7 +20,7 @@ import pytest
 import zenoh
 
 from swarmloc.deploy.batch import run_batch, run_ticks, swarm_brain
-from swarmloc.deploy.launch import supervised
+from swarmloc.deploy.launch import ONE_THREAD_ZENOH_RUNTIME, supervised
 from swarmloc.deploy.run import start_swarm
 from swarmloc.deploy.scenario import load_scenario
 from swarmloc.protocol.keys import Keys
@@ -91,6 +91,12 @@ class WorldWatch:
         self.session.close()
 
 
+def _environ(pid: int) -> dict[str, str]:
+    """The environment a running process was started with."""
+    raw = Path(f"/proc/{pid}/environ").read_bytes()
+    return dict(item.decode().partition("=")[::2] for item in raw.split(b"\0") if item)
+
+
 def _batch_trajectory(scenario, every_ticks: int) -> dict[int, list]:
     """True poses of a batch-engine run after every ``every_ticks``-th tick (what the world-server
     publishes as world states), and after the last."""
@@ -110,6 +116,9 @@ def test_process_run_matches_batch_engine(tmp_path):
     scenario, path = _scenario(tmp_path, ["world.robots=4", "world.duration_s=40.0", "world.seed=7"])
     with supervised() as sup:
         swarm = Swarm(sup, tmp_path, path, robots=4)
+        if "ZENOH_RUNTIME" not in os.environ:  # e-puck agents, and only they, run Zenoh on one thread
+            assert [_environ(a.pid).get("ZENOH_RUNTIME") for a in swarm.agents] == [ONE_THREAD_ZENOH_RUNTIME] * 4
+            assert "ZENOH_RUNTIME" not in _environ(swarm.world.pid)
         with WorldWatch(swarm.endpoint, swarm.keys) as watch:
             result = swarm.results()
             assert watch.wait_for(lambda s: s.tick == 400, 30), "the last world state never came"
