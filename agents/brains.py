@@ -16,7 +16,7 @@ import numpy as np
 
 from swarmloc.config import ConfigError
 from swarmloc.protocol.errors import ErrorCounter
-from swarmloc.protocol.messages import EpuckAct, EpuckSense, Welcome
+from swarmloc.protocol.messages import MAX_RECEIVED, EpuckAct, EpuckSense, Welcome
 
 
 class BrainError(RuntimeError):
@@ -38,7 +38,10 @@ class ForagingAgent:
 
     sense_type = EpuckSense
 
-    def __init__(self, brain, robot_id: int) -> None:
+    def __init__(self, brain, robot_id: int, *, packed: bool = True) -> None:
+        """``packed``: step the brain as one compiled call per tick (agents/agent_tick.py) when it
+        qualifies; else, or if False, through ``ForagingBrain.step``. Both give the same Acts."""
+        from swarmloc.agents.agent_tick import PackedForagingTick
         from swarmloc.agents.foraging import Inbox
 
         self.brain = brain
@@ -46,6 +49,8 @@ class ForagingAgent:
         self.robot_id = robot_id
         self._capacity = brain.config.heard_capacity
         self._no_mail = Inbox.empty(self._capacity)
+        self._packed = (PackedForagingTick(brain, MAX_RECEIVED)
+                        if packed and PackedForagingTick.supports(brain) else None)
 
     @classmethod
     def from_welcome(cls, welcome: Welcome, scenario) -> ForagingAgent:
@@ -93,6 +98,8 @@ class ForagingAgent:
         )
 
     def act(self, sense: EpuckSense, errors: ErrorCounter) -> EpuckAct:
+        if self._packed is not None:
+            return self._act_packed(sense, errors)
         out = self.brain.step(
             np.array([sense.encoder_steps]),
             np.array([sense.ir]),
@@ -107,6 +114,48 @@ class ForagingAgent:
             state=int(out.state[0]),
             pose_estimate=tuple(out.pose_estimate[0].tolist()),
         )
+
+
+    def _act_packed(self, sense: EpuckSense, errors: ErrorCounter) -> EpuckAct:
+        """``act`` as one compiled call (agents/agent_tick.py); the few Python operations here
+        are the whole per-tick cost around it, so they are kept few."""
+        t = self._packed
+        f = t.f
+        f[t.percepts:t.percepts + 13] = (*sense.encoder_steps, *sense.ir, *sense.ground)
+        rows = sense.received
+        m = len(rows)
+        if m:
+            f[t.range_bearing:t.range_bearing + 2 * m] = [x for r in rows for x in (r.range_m, r.bearing_rad)]
+            t.i[t.sender_len:t.sender_len + 2 * m] = [x for r in rows for x in (r.sender_id, len(r.payload))]
+            blob = np.frombuffer(b"".join([r.payload for r in rows]), np.uint8)
+        else:
+            blob = t.no_payloads
+        n = t.step(blob, m)
+        if n < 0:  # as SocialMessages.encode raises: a float32 overflow (ENCODE_FLOAT_OVERFLOW)
+            raise ValueError(f"payload: this robot's own message does not encode (code {n})")
+        for j in t.rejected(m):
+            self._reject(rows[j], errors)
+        answer = f[t.answer:t.answer + 5].tolist()
+        return EpuckAct(
+            tick=sense.tick,
+            robot_id=self.robot_id,
+            wheel_speed_steps_s=(answer[0], answer[1]),
+            payload=t.payload_out[:n].tobytes() if t.communicates else None,
+            state=int(t.i[t.state]),
+            pose_estimate=(answer[2], answer[3], answer[4]),
+        )
+
+    def _reject(self, msg, errors: ErrorCounter) -> None:
+        """Count a teammate's payload the compiled decoder rejected, with the reference decoder's
+        reason (agents/foraging.py: SocialMessages.decode, which the compiled one agrees with)."""
+        from swarmloc.agents.foraging import SocialMessages
+
+        try:
+            SocialMessages.decode([msg.payload], self._capacity)
+        except ValueError as exc:
+            errors.record(f"robot {msg.sender_id}", "payload", exc)
+        else:  # cannot happen while the two decoders agree (tests/test_social_codec.py)
+            errors.record(f"robot {msg.sender_id}", "payload", ValueError("payload: rejected by the compiled decoder"))
 
 
 class StandstillAgent:

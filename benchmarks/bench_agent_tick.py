@@ -6,7 +6,8 @@ not: every other process ran in between. This benchmark records robot 0's Senses
 in-process ES3 world (100 robots, the same bytes the world-server sends), then replays them into a
 fresh agent twice: back to back (warm), and after walking a 64 MB buffer before each tick to evict
 the CPU caches (cold). A "null" agent (decode, answer a fixed Act, encode) is the floor the brain
-adds to. Usage:
+adds to; "brain" is the agent as it runs (one compiled call per tick, agents/agent_tick.py),
+"reference" the same brain stepped through ForagingBrain.step. Usage:
 
     python benchmarks/bench_agent_tick.py [--ticks 600] [--evict-mb 64]
 """
@@ -26,9 +27,9 @@ from swarmloc.protocol.messages import EpuckAct, EpuckSense, decode, encode
 from swarmloc.world.service import served_world
 
 
-def _agent(sc, rid: int) -> ForagingAgent:
+def _agent(sc, rid: int, packed: bool = True) -> ForagingAgent:
     return ForagingAgent(ForagingBrain(sc.agent, sc.world.body, [rid], [agent_rng(sc.world.seed, rid)],
-                                       sc.world.tick_s), rid)
+                                       sc.world.tick_s), rid, packed=packed)
 
 
 def record(ticks: int) -> list[bytes]:
@@ -69,8 +70,8 @@ def main() -> int:
         decode(data, EpuckSense)
         return encode(null_act)
 
-    def per_tick_us(tick, cold: bool) -> float:
-        agent, errors = _agent(sc, 0), ErrorCounter()
+    def per_tick_us(tick, cold: bool, packed: bool = True) -> float:
+        agent, errors = _agent(sc, 0, packed), ErrorCounter()
         total = 0.0
         for data in senses:
             if cold:
@@ -83,11 +84,12 @@ def main() -> int:
     per_tick_us(brain_tick, False)  # load the kernels, fill the caches once
     with_mail = sum(1 for d in senses if decode(d, EpuckSense).received) / len(senses)
     print(f"robot 0 of ES3, {len(senses)} ticks, {with_mail:.0%} of them with received messages")
-    print(f"{'agent':>6} {'warm us/tick':>13} {'cold us/tick':>13}")
-    for name, tick in (("null", null_tick), ("brain", brain_tick)):
-        warm = min(per_tick_us(tick, False) for _ in range(3))
-        cold = min(per_tick_us(tick, True) for _ in range(3))
-        print(f"{name:>6} {warm:>13.1f} {cold:>13.1f}")
+    print(f"{'agent':>10} {'warm us/tick':>13} {'cold us/tick':>13}")
+    for name, tick, packed in (("null", null_tick, True), ("brain", brain_tick, True),
+                               ("reference", brain_tick, False)):
+        warm = min(per_tick_us(tick, False, packed) for _ in range(3))
+        cold = min(per_tick_us(tick, True, packed) for _ in range(3))
+        print(f"{name:>10} {warm:>13.1f} {cold:>13.1f}")
     return 0
 
 

@@ -62,6 +62,8 @@ class TickStats:
             "ticks_per_s": round(self.ticks / wall, 2) if wall > 0 else None,
             "tick_ms_p50": round(float(np.percentile(d, 50)) * 1e3, 3),
             "tick_ms_p99": round(float(np.percentile(d, 99)) * 1e3, 3),
+            "tick_ms_max": round(float(d.max()) * 1e3, 3),
+            "tick_ms_sum": round(float(d.sum()) * 1e3, 1),
             "late_acts": self.late_acts,
             "stale_acts": self.stale_acts,
             "overruns": self.overruns,

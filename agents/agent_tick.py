@@ -1,0 +1,348 @@
+"""One e-puck agent's whole tick in one compiled call: the foraging brain with its state packed.
+
+An agent process steps a :class:`~swarmloc.agents.foraging.ForagingBrain` of one robot. Through
+``ForagingBrain.step`` a tick is some thirty numpy and Python operations around the compiled
+:func:`~swarmloc.agents.kernels.brain_tick`, whose 58 array arguments numba checks and unboxes one
+by one. Warm, that is 26 µs; in a swarm of 100 processes taking turns on 2 cores every tick starts
+with cold caches, and the same tick costs about 180 µs: most of an agent's CPU beyond the bare
+transport (issue 2's tick-rate target).
+
+:class:`PackedForagingTick` keeps every array of that brain (state, constants, scratch, the inbox,
+the answer) as views into three buffers (float64, int64, bool), laid out by :func:`_views`, and
+runs a tick with one call of :func:`agent_tick` of six arguments: it decodes the teammates'
+payloads (:mod:`.social_codec`), calls ``brain_tick`` on the views, rotates the poses, and encodes
+the robot's own payload. The numbers are ``ForagingBrain.step``'s, bit for bit: the same
+``brain_tick`` runs on the same values, and the codec agrees with ``SocialMessages`` byte for byte
+(tests/test_agent_tick.py holds the two paths to each other tick by tick).
+
+It covers what an agent runs in practice: strategies whose confidence is the distance travelled
+(all but SSIKF and DSIKF, whose covariance odometry is numpy code outside the kernel), with the
+brain's own motor layers. :meth:`PackedForagingTick.supports` says whether a brain qualifies;
+the agent shell (agents/brains.py: ForagingAgent) falls back to ``ForagingBrain.step`` otherwise.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from swarmloc.agents import kernels
+from swarmloc.agents.foraging import _COS_IR, _SIN_IR
+from swarmloc.agents.social_codec import decode_payload, encode_payload
+
+#: Header slots of the int buffer: robots, heard capacity, encounter memory, inbox capacity, the
+#: tick count, and how many payloads the last tick rejected.
+H_N, H_K, H_E, H_M, H_TICK, H_BAD, N_HEADER = range(7)
+
+#: Names of :func:`_views`' arrays, in its order.
+VIEWS = (
+    # float64: percepts (encoder, IR and ground readings of a robot are contiguous, in that order)
+    "encoder_steps", "ir", "ground",
+    # poses: before the tick, of the tick before (the frame of messages heard now), after the tick
+    "pose", "frame_pose", "new_pose",
+    "goal_xy", "goal_p_m", "goal_cov", "search_left_m", "turn_dir", "heard_bearing_rad", "heard_range_m",
+    "params", "cos_ir", "sin_ir", "geometry", "atan",
+    # the inbox as received: (range, bearing) per message; the accepted messages and their content
+    "msg_range_bearing", "in_range_m", "in_bearing_rad", "c_distance", "c_angle", "c_p", "c_heard_bearing",
+    # the answer: wheel speeds then pose (contiguous), the message fields
+    "cmd", "pose_out", "distance", "angle", "p", "heard_bearing_out",
+    # int64
+    "header", "robot_ids", "target", "lost_count", "visit_ticks", "turn_ticks", "straight_ticks", "heard_ids",
+    "partner_ids", "partner_until", "settings", "math_fns", "rng_fn", "rng_state", "need", "n_need",
+    "msg_sender_len", "receiver", "in_sender_id", "content_row", "c_heard_ids", "heard_ids_out", "state",
+    # bool
+    "known", "searching", "adopted", "c_known", "msg_bad", "known_out", "on_path",
+)
+
+
+@njit(cache=True, error_model="numpy")
+def _views(f, i, b):
+    """The arrays of a packed brain, as views into its buffers ``f`` (float64), ``i`` (int64) and
+    ``b`` (bool), sized by the header ``i[:N_HEADER]``; then the extent used of each buffer."""
+    n, k, e, mm = i[H_N], i[H_K], i[H_E], i[H_M]
+    o = 0
+    encoder_steps = f[o:o + 2 * n].reshape((n, 2))
+    o += 2 * n
+    ir = f[o:o + 8 * n].reshape((n, 8))
+    o += 8 * n
+    ground = f[o:o + 3 * n].reshape((n, 3))
+    o += 3 * n
+    pose = f[o:o + 3 * n].reshape((n, 3))
+    o += 3 * n
+    frame_pose = f[o:o + 3 * n].reshape((n, 3))
+    o += 3 * n
+    new_pose = f[o:o + 3 * n].reshape((n, 3))
+    o += 3 * n
+    goal_xy = f[o:o + 4 * n].reshape((n, 2, 2))
+    o += 4 * n
+    goal_p_m = f[o:o + 2 * n].reshape((n, 2))
+    o += 2 * n
+    goal_cov = f[o:o + 18 * n].reshape((n, 2, 3, 3))
+    o += 18 * n
+    search_left_m = f[o:o + n]
+    o += n
+    turn_dir = f[o:o + n]
+    o += n
+    heard_bearing_rad = f[o:o + k * n].reshape((n, k))
+    o += k * n
+    heard_range_m = f[o:o + k * n].reshape((n, k))
+    o += k * n
+    params = f[o:o + kernels.N_BRAIN_PARAMS]
+    o += kernels.N_BRAIN_PARAMS
+    cos_ir = f[o:o + 8]
+    o += 8
+    sin_ir = f[o:o + 8]
+    o += 8
+    geometry = f[o:o + 6 * n].reshape((2, n, 3))
+    o += 6 * n
+    atan = f[o:o + 3 * n].reshape((n, 3))
+    o += 3 * n
+    msg_range_bearing = f[o:o + 2 * mm].reshape((mm, 2))
+    o += 2 * mm
+    in_range_m = f[o:o + mm]
+    o += mm
+    in_bearing_rad = f[o:o + mm]
+    o += mm
+    c_distance = f[o:o + 2 * mm].reshape((mm, 2))
+    o += 2 * mm
+    c_angle = f[o:o + 2 * mm].reshape((mm, 2))
+    o += 2 * mm
+    c_p = f[o:o + 2 * mm].reshape((mm, 2))
+    o += 2 * mm
+    c_heard_bearing = f[o:o + k * mm].reshape((mm, k))
+    o += k * mm
+    cmd = f[o:o + 2 * n].reshape((n, 2))
+    o += 2 * n
+    pose_out = f[o:o + 3 * n].reshape((n, 3))
+    o += 3 * n
+    distance = f[o:o + 2 * n].reshape((n, 2))
+    o += 2 * n
+    angle = f[o:o + 2 * n].reshape((n, 2))
+    o += 2 * n
+    p = f[o:o + 2 * n].reshape((n, 2))
+    o += 2 * n
+    heard_bearing_out = f[o:o + k * n].reshape((n, k))
+    o += k * n
+    f_extent = o
+
+    o = 0
+    header = i[o:o + N_HEADER]
+    o += N_HEADER
+    robot_ids = i[o:o + n]
+    o += n
+    target = i[o:o + n]
+    o += n
+    lost_count = i[o:o + n]
+    o += n
+    visit_ticks = i[o:o + 2 * n].reshape((n, 2))
+    o += 2 * n
+    turn_ticks = i[o:o + n]
+    o += n
+    straight_ticks = i[o:o + n]
+    o += n
+    heard_ids = i[o:o + k * n].reshape((n, k))
+    o += k * n
+    partner_ids = i[o:o + e * n].reshape((n, e))
+    o += e * n
+    partner_until = i[o:o + e * n].reshape((n, e))
+    o += e * n
+    settings = i[o:o + kernels.N_SETTINGS]
+    o += kernels.N_SETTINGS
+    math_fns = i[o:o + 3]
+    o += 3
+    rng_fn = i[o:o + n]
+    o += n
+    rng_state = i[o:o + n]
+    o += n
+    need = i[o:o + n]
+    o += n
+    n_need = i[o:o + 1]
+    o += 1
+    msg_sender_len = i[o:o + 2 * mm].reshape((mm, 2))
+    o += 2 * mm
+    receiver = i[o:o + mm]
+    o += mm
+    in_sender_id = i[o:o + mm]
+    o += mm
+    content_row = i[o:o + mm]
+    o += mm
+    c_heard_ids = i[o:o + k * mm].reshape((mm, k))
+    o += k * mm
+    heard_ids_out = i[o:o + k * n].reshape((n, k))
+    o += k * n
+    state = i[o:o + n]
+    o += n
+    i_extent = o
+
+    o = 0
+    known = b[o:o + 2 * n].reshape((n, 2))
+    o += 2 * n
+    searching = b[o:o + n]
+    o += n
+    adopted = b[o:o + 2 * n].reshape((n, 2))
+    o += 2 * n
+    c_known = b[o:o + 2 * mm].reshape((mm, 2))
+    o += 2 * mm
+    msg_bad = b[o:o + mm]
+    o += mm
+    known_out = b[o:o + 2 * n].reshape((n, 2))
+    o += 2 * n
+    on_path = b[o:o + n]
+    o += n
+    b_extent = o
+    return (
+        (encoder_steps, ir, ground, pose, frame_pose, new_pose, goal_xy, goal_p_m, goal_cov, search_left_m,
+         turn_dir, heard_bearing_rad, heard_range_m, params, cos_ir, sin_ir, geometry, atan, msg_range_bearing,
+         in_range_m, in_bearing_rad, c_distance, c_angle, c_p, c_heard_bearing, cmd, pose_out, distance, angle, p,
+         heard_bearing_out),
+        (header, robot_ids, target, lost_count, visit_ticks, turn_ticks, straight_ticks, heard_ids, partner_ids,
+         partner_until, settings, math_fns, rng_fn, rng_state, need, n_need, msg_sender_len, receiver,
+         in_sender_id, content_row, c_heard_ids, heard_ids_out, state),
+        (known, searching, adopted, c_known, msg_bad, known_out, on_path),
+        (f_extent, i_extent, b_extent),
+    )
+
+
+@njit(cache=True, error_model="numpy")
+def agent_tick(f, i, b, blob, n_messages, payload_out):
+    """One tick of a packed brain (:func:`_views`), percepts already in place.
+
+    ``blob`` (uint8) holds the payloads of the ``n_messages`` messages received, back to back (their
+    sender ids and lengths in ``msg_sender_len``, range and bearing in ``msg_range_bearing``).
+    Each payload is decoded (:func:`.social_codec.decode_payload`); a payload that does not
+    decode is flagged in ``msg_bad`` and its message dropped, the others kept in order, as
+    ``ForagingAgent`` does. Then ``brain_tick`` (every layer, the robot's own motors), the pose
+    rotation of ``ForagingBrain._commit_tick``, and the robot's payload into ``payload_out``.
+    Returns the payload's length (0 for a strategy that does not communicate)."""
+    fv, iv, bv, _ = _views(f, i, b)
+    (encoder_steps, ir, ground, pose, frame_pose, new_pose, goal_xy, goal_p_m, goal_cov, search_left_m,
+     turn_dir, heard_bearing_rad, heard_range_m, params, cos_ir, sin_ir, geometry, atan, msg_range_bearing,
+     in_range_m, in_bearing_rad, c_distance, c_angle, c_p, c_heard_bearing, cmd, pose_out, distance, angle, p,
+     heard_bearing_out) = fv
+    (header, robot_ids, target, lost_count, visit_ticks, turn_ticks, straight_ticks, heard_ids, partner_ids,
+     partner_until, settings, math_fns, rng_fn, rng_state, need, n_need, msg_sender_len, receiver,
+     in_sender_id, content_row, c_heard_ids, heard_ids_out, state) = iv
+    (known, searching, adopted, c_known, msg_bad, known_out, on_path) = bv
+    k = header[H_K]
+    m = 0
+    bad = 0
+    start = 0
+    for j in range(n_messages):
+        stop = start + msg_sender_len[j, 1]
+        if decode_payload(blob, start, stop, k, m, c_known, c_distance, c_angle, c_p, c_heard_ids,
+                          c_heard_bearing):
+            msg_bad[j] = False
+            in_sender_id[m] = msg_sender_len[j, 0]
+            in_range_m[m] = msg_range_bearing[j, 0]
+            in_bearing_rad[m] = msg_range_bearing[j, 1]
+            m += 1
+        else:
+            msg_bad[j] = True
+            bad += 1
+        start = stop
+    header[H_BAD] = bad
+    tick = header[H_TICK] + 1
+    kernels.brain_tick(
+        encoder_steps, ir, ground, tick,
+        pose, new_pose, frame_pose, robot_ids, known, goal_xy, goal_p_m, goal_cov, target, searching,
+        search_left_m, lost_count, visit_ticks, turn_ticks, straight_ticks, turn_dir, heard_ids, heard_bearing_rad,
+        heard_range_m, partner_ids, partner_until, adopted,
+        receiver[:m], in_sender_id[:m], in_range_m[:m], in_bearing_rad[:m], content_row[:m], c_known[:m],
+        c_distance[:m], c_angle[:m], c_p[:m], c_heard_ids[:m], c_heard_bearing[:m],
+        params, settings, math_fns, rng_fn, rng_state, cos_ir, sin_ir,
+        geometry, atan, need, n_need,
+        cmd, known_out, distance, angle, p, heard_ids_out, heard_bearing_out, state, pose_out, on_path,
+    )
+    header[H_TICK] = tick
+    # ForagingBrain._commit_tick: the frame of next tick's messages is this tick's starting pose
+    frame_pose[:] = pose
+    pose[:] = new_pose
+    if settings[kernels.S_COMMUNICATES] == 0:
+        return 0
+    return encode_payload(known_out[0], distance[0], angle[0], p[0], heard_ids_out[0], heard_bearing_out[0],
+                          payload_out)
+
+
+_loaded = False
+
+
+def _load_kernel(brain) -> None:
+    """Load (or compile) :func:`agent_tick` now, once per process, by stepping a throwaway
+    packed brain with its own generator: as ``foraging._load_kernels``, so that the first tick of
+    a run does not load it (100 agents loading it at once at tick 1 cost seconds)."""
+    global _loaded
+    if _loaded:
+        return
+    _loaded = True
+    throwaway = type(brain)(brain.config, brain.body, [0], [np.random.default_rng(0)], brain.tick_s)
+    packed = PackedForagingTick(throwaway, 1)
+    packed.step(packed.no_payloads, 0)
+
+
+class PackedForagingTick:
+    """A one-robot :class:`~swarmloc.agents.foraging.ForagingBrain`, moved into packed buffers and
+    stepped by :func:`agent_tick`. The brain's arrays are copied at construction; the brain
+    itself must not be stepped afterwards (its generator, which the kernel draws from, must live:
+    the caller keeps the brain)."""
+
+    def __init__(self, brain, max_messages: int):
+        if not self.supports(brain):
+            raise ValueError("PackedForagingTick: a one-robot brain with distance confidence and its own motors only")
+        _load_kernel(brain)
+        n, k, e = 1, brain.config.heard_capacity, brain.config.encounter_memory
+        size = 256 + 64 * k + max_messages * (16 + 8 * k)
+        self.f, self.i, self.b = np.zeros(size), np.zeros(size, np.int64), np.zeros(size, bool)
+        self.i[:N_HEADER] = (n, k, e, max_messages, brain.tick, 0)
+        fv, iv, bv, extents = _views(self.f, self.i, self.b)
+        if not all(x <= size for x in extents):  # the buffers' sizes are generous; check they are enough
+            raise AssertionError(f"packed brain needs {extents}, buffers have {size}")
+        self.view = dict(zip(VIEWS, (*fv, *iv, *bv), strict=True))
+        v = self.view
+        for name in ("known", "goal_xy", "goal_p_m", "target", "searching", "search_left_m", "lost_count",
+                     "visit_ticks", "turn_ticks", "straight_ticks", "turn_dir", "heard_ids", "heard_bearing_rad",
+                     "heard_range_m", "partner_ids", "partner_until", "robot_ids"):
+            v[name][...] = getattr(brain, name)
+        v["adopted"][...] = brain._adopted
+        v["pose"][...] = brain.pose
+        v["frame_pose"][...] = brain.pose_history[1]
+        v["params"][...] = brain._params
+        v["settings"][...] = brain._settings
+        v["settings"][kernels.S_MOTORS] = 1
+        fn, rng_state = brain._rng_addresses()
+        v["rng_fn"][...], v["rng_state"][...] = fn, rng_state
+        v["math_fns"][...] = brain._math
+        v["cos_ir"][...], v["sin_ir"][...] = _COS_IR, _SIN_IR
+        v["content_row"][...] = np.arange(max_messages)
+        self.max_messages = max_messages
+        self.communicates = bool(brain.strategy.communicates)
+        self.payload_out = np.zeros(64, np.uint8)
+        # Read-only, as np.frombuffer(bytes) makes the inbox's: one type, one compiled agent_tick.
+        self.no_payloads = np.frombuffer(b"", np.uint8)
+        # Offsets (in items) of what the agent shell reads and writes each tick.
+        self.percepts = _offset(v["encoder_steps"], self.f)  # encoder, ir, ground: 13 floats
+        self.range_bearing = _offset(v["msg_range_bearing"], self.f)
+        self.sender_len = _offset(v["msg_sender_len"], self.i)
+        self.answer = _offset(v["cmd"], self.f)  # wheel speeds then pose: 5 floats
+        self.state = _offset(v["state"], self.i)
+
+    @staticmethod
+    def supports(brain) -> bool:
+        return brain.n == 1 and brain.goal_cov is None and brain._motors is None
+
+    def step(self, blob: np.ndarray, n_messages: int) -> int:
+        """One tick, percepts and messages written by the caller; the payload's length."""
+        return agent_tick(self.f, self.i, self.b, blob, n_messages, self.payload_out)
+
+    @property
+    def tick(self) -> int:
+        return int(self.i[H_TICK])
+
+    def rejected(self, n_messages: int) -> list[int]:
+        """Indices of the messages whose payload the last tick (of ``n_messages``) rejected."""
+        if not self.i[H_BAD]:
+            return []
+        return np.flatnonzero(self.view["msg_bad"][:n_messages]).tolist()
+
+
+def _offset(view: np.ndarray, base: np.ndarray) -> int:
+    return (view.ctypes.data - base.ctypes.data) // base.itemsize

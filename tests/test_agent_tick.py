@@ -1,0 +1,104 @@
+"""The packed agent tick (agents/agent_tick.py) against ForagingBrain.step, Act for Act.
+
+Two agents per robot, built alike from the same seed: one steps its brain as one compiled call
+(the agent process's path), the other through ForagingBrain.step (the reference, also the batch
+engine's code). Both answer every Sense of a real served world; the Acts, the payload bytes and the
+rejection counts must be equal, tick after tick. Equality is exact: the packed path runs the same
+kernel on the same values.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import msgpack
+import numpy as np
+import pytest
+
+from swarmloc.agents.agent_tick import PackedForagingTick
+from swarmloc.agents.brains import ForagingAgent
+from swarmloc.agents.foraging import ForagingBrain, agent_rng
+from swarmloc.agents.social_odometry import STRATEGIES
+from swarmloc.deploy.scenario import load_any
+from swarmloc.protocol.epuck import STATE_KNOWS_BOTH
+from swarmloc.protocol.errors import ErrorCounter
+from swarmloc.protocol.messages import EpuckSense, RabMessage, decode
+from swarmloc.world.service import served_world
+
+
+def _agents(sc, packed: bool) -> list[ForagingAgent]:
+    return [
+        ForagingAgent(ForagingBrain(sc.agent, sc.world.body, [rid], [agent_rng(sc.world.seed, rid)], sc.world.tick_s),
+                      rid, packed=packed)
+        for rid in range(sc.world.robots)
+    ]
+
+
+def _corrupt(sense: EpuckSense, tick: int) -> EpuckSense:
+    """Every 7th tick, spoil the payload of the first message: bad flags, or a truncated body."""
+    if tick % 7 or not sense.received:
+        return sense
+    first = sense.received[0]
+    bad = msgpack.packb([9, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, []]) if tick % 14 else first.payload[:-3]
+    return dataclasses.replace(sense, received=(dataclasses.replace(first, payload=bad), *sense.received[1:]))
+
+
+@pytest.mark.parametrize("strategy", [s for s, v in STRATEGIES.items() if v.confidence == "distance" and not v.central])
+def test_packed_tick_gives_the_reference_acts(strategy):
+    loaded = load_any("ES1", {"seed": 3}, [f'agent.strategy="{strategy}"', "world.robots=10"])
+    sc = loaded.scenario
+    world = served_world(loaded)
+    packed, reference = _agents(sc, True), _agents(sc, False)
+    assert all(a._packed is not None for a in packed) and all(a._packed is None for a in reference)
+    errors_packed, errors_reference = ErrorCounter(), ErrorCounter()
+    heard = sent = 0
+    for tick in range(600):
+        acts = []
+        for rid, data in world.senses():
+            sense = _corrupt(decode(data, EpuckSense), tick)
+            act = packed[rid].act(sense, errors_packed)
+            assert act == reference[rid].act(sense, errors_reference), f"robot {rid}, tick {tick}"
+            heard += len(sense.received)
+            sent += act.payload is not None
+            acts.append(act)
+        world.step(acts)
+    assert dict(errors_packed.counts) == dict(errors_reference.counts)
+    # the run exercised what it is meant to: messages heard, some of them spoilt and rejected
+    if STRATEGIES[strategy].communicates:
+        assert heard > 100 and sum(errors_packed.counts.values()) > 5 and sent == 600 * 10
+    else:
+        assert heard == sent == 0
+
+
+def test_covariance_strategies_and_motor_overrides_take_the_reference_path():
+    loaded = load_any("ES1", {"seed": 1}, ['agent.strategy="SSIKF"', "world.robots=2"])
+    (agent, _) = _agents(loaded.scenario, True)
+    assert agent._packed is None
+    loaded = load_any("ES1", {"seed": 1}, ["world.robots=1"])
+    sc = loaded.scenario
+    brain = ForagingBrain(sc.agent, sc.world.body, [0], [np.random.default_rng(0)], sc.world.tick_s)
+    assert PackedForagingTick.supports(brain)
+    brain._motors = lambda ir: np.zeros((1, 2))
+    assert not PackedForagingTick.supports(brain)
+    with pytest.raises(ValueError, match="PackedForagingTick"):
+        PackedForagingTick(brain, 16)
+
+
+def test_a_full_inbox_of_sixteen_messages_is_decoded():
+    """The most a Sense carries (MAX_RECEIVED): every message reaches the brain's fusion."""
+    loaded = load_any("ES1", {"seed": 5}, ["world.robots=1"])
+    sc = loaded.scenario
+    (packed,), (reference,) = _agents(sc, True), _agents(sc, False)
+    # both goals known; the sender heard us (robot 0) at bearing 0.5 rad: eq. 27 has all it needs
+    payload = msgpack.packb([3, 0.5, 0.25, 40.0, 0.75, -0.5, 10.0, [0, 0.5]], use_single_float=True)
+    received = tuple(RabMessage(sender_id=100 + j, range_m=0.05 + 0.005 * j, bearing_rad=-1.0 + 0.1 * j,
+                                payload=payload) for j in range(16))
+    sense = EpuckSense(tick=0, robot_id=0, encoder_steps=(0.0, 0.0), ir=(0.0,) * 8, ground=(1.0, 1.0, 1.0),
+                       received=received)
+    errors = ErrorCounter()
+    for tick in range(3):  # a message is fused once its sender was heard the tick before
+        act = packed.act(dataclasses.replace(sense, tick=tick), errors)
+        assert act == reference.act(dataclasses.replace(sense, tick=tick), ErrorCounter())
+    assert not errors.counts
+    # the robot adopted a neighbour's goals: it now knows both and says so in its state code
+    assert act.state & STATE_KNOWS_BOTH
