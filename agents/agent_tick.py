@@ -27,12 +27,18 @@ import numpy as np
 from numba import njit
 
 from swarmloc.agents import kernels
+from swarmloc.agents.epuck_wire import encode_act, parse_sense
 from swarmloc.agents.foraging import _COS_IR, _SIN_IR
 from swarmloc.agents.social_codec import decode_payload, encode_payload
 
 #: Header slots of the int buffer: robots, heard capacity, encounter memory, inbox capacity, the
-#: tick count, and how many payloads the last tick rejected.
-H_N, H_K, H_E, H_M, H_TICK, H_BAD, N_HEADER = range(7)
+#: tick count, how many payloads the last tick rejected, how many messages it received, and the
+#: tick number of the last Sense parsed by :func:`agent_tick_wire`.
+H_N, H_K, H_E, H_M, H_TICK, H_BAD, H_MESSAGES, H_SENSE_TICK, N_HEADER = range(9)
+#: :func:`agent_tick_wire`'s answers besides an Act's length: the Sense is not in the form the
+#: compiled parser takes (nothing done: decode it with the protocol codec instead); the tick ran
+#: but its Act or payload does not encode (build it from the outputs: the codec says why).
+WIRE_USE_CODEC, WIRE_ACT_INVALID = -1, -2
 
 #: Names of :func:`_views`' arrays, in its order.
 VIEWS = (
@@ -49,10 +55,16 @@ VIEWS = (
     # int64
     "header", "robot_ids", "target", "lost_count", "visit_ticks", "turn_ticks", "straight_ticks", "heard_ids",
     "partner_ids", "partner_until", "settings", "math_fns", "rng_fn", "rng_state", "need", "n_need",
-    "msg_sender_len", "receiver", "in_sender_id", "content_row", "c_heard_ids", "heard_ids_out", "state",
+    "msg_sender_len", "msg_start", "receiver", "in_sender_id", "content_row", "c_heard_ids", "heard_ids_out", "state",
     # bool
     "known", "searching", "adopted", "c_known", "msg_bad", "known_out", "on_path",
 )
+
+#: Positions in :func:`_views`' float and int tuples of the arrays the entry points pick out.
+_N_FLOAT_VIEWS = VIEWS.index("header")
+F_RANGE_BEARING, F_CMD, F_POSE_OUT = (VIEWS.index(x) for x in ("msg_range_bearing", "cmd", "pose_out"))
+I_HEADER, I_ROBOT_IDS, I_SENDER_LEN, I_START, I_STATE = (
+    VIEWS.index(x) - _N_FLOAT_VIEWS for x in ("header", "robot_ids", "msg_sender_len", "msg_start", "state"))
 
 
 @njit(cache=True, error_model="numpy")
@@ -160,6 +172,8 @@ def _views(f, i, b):
     o += 1
     msg_sender_len = i[o:o + 2 * mm].reshape((mm, 2))
     o += 2 * mm
+    msg_start = i[o:o + mm]
+    o += mm
     receiver = i[o:o + mm]
     o += mm
     in_sender_id = i[o:o + mm]
@@ -196,7 +210,7 @@ def _views(f, i, b):
          in_range_m, in_bearing_rad, c_distance, c_angle, c_p, c_heard_bearing, cmd, pose_out, distance, angle, p,
          heard_bearing_out),
         (header, robot_ids, target, lost_count, visit_ticks, turn_ticks, straight_ticks, heard_ids, partner_ids,
-         partner_until, settings, math_fns, rng_fn, rng_state, need, n_need, msg_sender_len, receiver,
+         partner_until, settings, math_fns, rng_fn, rng_state, need, n_need, msg_sender_len, msg_start, receiver,
          in_sender_id, content_row, c_heard_ids, heard_ids_out, state),
         (known, searching, adopted, c_known, msg_bad, known_out, on_path),
         (f_extent, i_extent, b_extent),
@@ -204,33 +218,33 @@ def _views(f, i, b):
 
 
 @njit(cache=True, error_model="numpy")
-def agent_tick(f, i, b, blob, n_messages, payload_out):
-    """One tick of a packed brain (:func:`_views`), percepts already in place.
+def _tick(f, i, b, buf, payload_out):
+    """The tick of a packed brain whose percepts are in place and whose ``header[H_MESSAGES]``
+    received messages are described by ``msg_sender_len``, ``msg_range_bearing`` and
+    ``msg_start`` (each payload's offset in ``buf``, uint8).
 
-    ``blob`` (uint8) holds the payloads of the ``n_messages`` messages received, back to back (their
-    sender ids and lengths in ``msg_sender_len``, range and bearing in ``msg_range_bearing``).
     Each payload is decoded (:func:`.social_codec.decode_payload`); a payload that does not
     decode is flagged in ``msg_bad`` and its message dropped, the others kept in order, as
     ``ForagingAgent`` does. Then ``brain_tick`` (every layer, the robot's own motors), the pose
     rotation of ``ForagingBrain._commit_tick``, and the robot's payload into ``payload_out``.
-    Returns the payload's length (0 for a strategy that does not communicate)."""
+    Returns the payload's length, -1 for none (a strategy that does not communicate), or an
+    ``encode_payload`` error code below -1."""
     fv, iv, bv, _ = _views(f, i, b)
     (encoder_steps, ir, ground, pose, frame_pose, new_pose, goal_xy, goal_p_m, goal_cov, search_left_m,
      turn_dir, heard_bearing_rad, heard_range_m, params, cos_ir, sin_ir, geometry, atan, msg_range_bearing,
      in_range_m, in_bearing_rad, c_distance, c_angle, c_p, c_heard_bearing, cmd, pose_out, distance, angle, p,
      heard_bearing_out) = fv
     (header, robot_ids, target, lost_count, visit_ticks, turn_ticks, straight_ticks, heard_ids, partner_ids,
-     partner_until, settings, math_fns, rng_fn, rng_state, need, n_need, msg_sender_len, receiver,
+     partner_until, settings, math_fns, rng_fn, rng_state, need, n_need, msg_sender_len, msg_start, receiver,
      in_sender_id, content_row, c_heard_ids, heard_ids_out, state) = iv
     (known, searching, adopted, c_known, msg_bad, known_out, on_path) = bv
     k = header[H_K]
     m = 0
     bad = 0
-    start = 0
-    for j in range(n_messages):
-        stop = start + msg_sender_len[j, 1]
-        if decode_payload(blob, start, stop, k, m, c_known, c_distance, c_angle, c_p, c_heard_ids,
-                          c_heard_bearing):
+    for j in range(header[H_MESSAGES]):
+        start = msg_start[j]
+        if decode_payload(buf, start, start + msg_sender_len[j, 1], k, m, c_known, c_distance, c_angle, c_p,
+                          c_heard_ids, c_heard_bearing):
             msg_bad[j] = False
             in_sender_id[m] = msg_sender_len[j, 0]
             in_range_m[m] = msg_range_bearing[j, 0]
@@ -239,7 +253,6 @@ def agent_tick(f, i, b, blob, n_messages, payload_out):
         else:
             msg_bad[j] = True
             bad += 1
-        start = stop
     header[H_BAD] = bad
     tick = header[H_TICK] + 1
     kernels.brain_tick(
@@ -258,9 +271,47 @@ def agent_tick(f, i, b, blob, n_messages, payload_out):
     frame_pose[:] = pose
     pose[:] = new_pose
     if settings[kernels.S_COMMUNICATES] == 0:
-        return 0
-    return encode_payload(known_out[0], distance[0], angle[0], p[0], heard_ids_out[0], heard_bearing_out[0],
-                          payload_out)
+        return -1
+    n = encode_payload(known_out[0], distance[0], angle[0], p[0], heard_ids_out[0], heard_bearing_out[0],
+                       payload_out)
+    return n if n >= 0 else n - 1
+
+
+@njit(cache=True, error_model="numpy")
+def agent_tick(f, i, b, blob, n_messages, payload_out):
+    """One tick of a packed brain (:func:`_views`) whose percepts the caller wrote, and the
+    payloads of its ``n_messages`` messages back to back in ``blob`` (uint8; their sender ids
+    and lengths in ``msg_sender_len``, range and bearing in ``msg_range_bearing``): see
+    :func:`_tick`, whose answer this is."""
+    _, iv, _, _ = _views(f, i, b)
+    header, msg_sender_len, msg_start = iv[I_HEADER], iv[I_SENDER_LEN], iv[I_START]
+    header[H_MESSAGES] = n_messages
+    start = 0
+    for j in range(n_messages):
+        msg_start[j] = start
+        start += msg_sender_len[j, 1]
+    return _tick(f, i, b, blob, payload_out)
+
+
+@njit(cache=True, error_model="numpy")
+def agent_tick_wire(f, i, b, sense, payload_out, act_out):
+    """One tick from the Sense's bytes to the Act's: :func:`.epuck_wire.parse_sense` (the
+    world-server's canonical form only; else ``WIRE_USE_CODEC``, nothing done), :func:`_tick`,
+    then :func:`.epuck_wire.encode_act` into ``act_out``. Returns the Act's length, or
+    ``WIRE_ACT_INVALID`` if the payload or the Act does not encode."""
+    fv, iv, _, _ = _views(f, i, b)
+    header, robot_ids, msg_sender_len, msg_start = iv[I_HEADER], iv[I_ROBOT_IDS], iv[I_SENDER_LEN], iv[I_START]
+    n = parse_sense(sense, robot_ids[0], f[:13], fv[F_RANGE_BEARING], msg_sender_len, msg_start,
+                    header[H_SENSE_TICK:H_SENSE_TICK + 1])
+    if n < 0:
+        return WIRE_USE_CODEC
+    header[H_MESSAGES] = n
+    payload_n = _tick(f, i, b, sense, payload_out)
+    if payload_n < -1:
+        return WIRE_ACT_INVALID
+    size = encode_act(header[H_SENSE_TICK], robot_ids[0], fv[F_CMD][0], payload_out, payload_n,
+                      iv[I_STATE][0], fv[F_POSE_OUT][0], act_out)
+    return size if size >= 0 else WIRE_ACT_INVALID
 
 
 _loaded = False
@@ -277,6 +328,8 @@ def _load_kernel(brain) -> None:
     throwaway = type(brain)(brain.config, brain.body, [0], [np.random.default_rng(0)], brain.tick_s)
     packed = PackedForagingTick(throwaway, 1)
     packed.step(packed.no_payloads, 0)
+    if packed.step_wire(packed.no_payloads) != WIRE_USE_CODEC:  # an empty Sense: nothing done
+        raise AssertionError("agent_tick_wire took an empty Sense")
 
 
 class PackedForagingTick:
@@ -292,7 +345,7 @@ class PackedForagingTick:
         n, k, e = 1, brain.config.heard_capacity, brain.config.encounter_memory
         size = 256 + 64 * k + max_messages * (16 + 8 * k)
         self.f, self.i, self.b = np.zeros(size), np.zeros(size, np.int64), np.zeros(size, bool)
-        self.i[:N_HEADER] = (n, k, e, max_messages, brain.tick, 0)
+        self.i[:N_HEADER] = (n, k, e, max_messages, brain.tick, 0, 0, 0)
         fv, iv, bv, extents = _views(self.f, self.i, self.b)
         if not all(x <= size for x in extents):  # the buffers' sizes are generous; check they are enough
             raise AssertionError(f"packed brain needs {extents}, buffers have {size}")
@@ -316,32 +369,47 @@ class PackedForagingTick:
         self.max_messages = max_messages
         self.communicates = bool(brain.strategy.communicates)
         self.payload_out = np.zeros(64, np.uint8)
+        self.act_out = np.zeros(256, np.uint8)
         # Read-only, as np.frombuffer(bytes) makes the inbox's: one type, one compiled agent_tick.
         self.no_payloads = np.frombuffer(b"", np.uint8)
         # Offsets (in items) of what the agent shell reads and writes each tick.
         self.percepts = _offset(v["encoder_steps"], self.f)  # encoder, ir, ground: 13 floats
+        if self.percepts != 0:  # agent_tick_wire has the parser write them to f[:13]
+            raise AssertionError("the percepts must open the float buffer")
         self.range_bearing = _offset(v["msg_range_bearing"], self.f)
         self.sender_len = _offset(v["msg_sender_len"], self.i)
         self.answer = _offset(v["cmd"], self.f)  # wheel speeds then pose: 5 floats
         self.state = _offset(v["state"], self.i)
+
+    USE_CODEC, ACT_INVALID = WIRE_USE_CODEC, WIRE_ACT_INVALID
 
     @staticmethod
     def supports(brain) -> bool:
         return brain.n == 1 and brain.goal_cov is None and brain._motors is None
 
     def step(self, blob: np.ndarray, n_messages: int) -> int:
-        """One tick, percepts and messages written by the caller; the payload's length."""
+        """One tick, percepts and messages written by the caller (:func:`agent_tick`)."""
         return agent_tick(self.f, self.i, self.b, blob, n_messages, self.payload_out)
+
+    def step_wire(self, sense: np.ndarray) -> int:
+        """One tick from a Sense's bytes (uint8, read-only) to the Act's in ``act_out``
+        (:func:`agent_tick_wire`)."""
+        return agent_tick_wire(self.f, self.i, self.b, sense, self.payload_out, self.act_out)
 
     @property
     def tick(self) -> int:
         return int(self.i[H_TICK])
 
-    def rejected(self, n_messages: int) -> list[int]:
-        """Indices of the messages whose payload the last tick (of ``n_messages``) rejected."""
+    @property
+    def sense_tick(self) -> int:
+        """The tick number of the last Sense :meth:`step_wire` parsed."""
+        return int(self.i[H_SENSE_TICK])
+
+    def rejected(self) -> list[int]:
+        """Indices of the messages whose payload the last tick rejected."""
         if not self.i[H_BAD]:
             return []
-        return np.flatnonzero(self.view["msg_bad"][:n_messages]).tolist()
+        return np.flatnonzero(self.view["msg_bad"][: self.i[H_MESSAGES]]).tolist()
 
 
 def _offset(view: np.ndarray, base: np.ndarray) -> int:

@@ -16,7 +16,7 @@ import numpy as np
 
 from swarmloc.config import ConfigError
 from swarmloc.protocol.errors import ErrorCounter
-from swarmloc.protocol.messages import MAX_RECEIVED, EpuckAct, EpuckSense, Welcome
+from swarmloc.protocol.messages import MAX_RECEIVED, EpuckAct, EpuckSense, Welcome, encode
 
 
 class BrainError(RuntimeError):
@@ -41,7 +41,6 @@ class ForagingAgent:
     def __init__(self, brain, robot_id: int, *, packed: bool = True) -> None:
         """``packed``: step the brain as one compiled call per tick (agents/agent_tick.py) when it
         qualifies; else, or if False, through ``ForagingBrain.step``. Both give the same Acts."""
-        from swarmloc.agents.agent_tick import PackedForagingTick
         from swarmloc.agents.foraging import Inbox
 
         self.brain = brain
@@ -49,6 +48,8 @@ class ForagingAgent:
         self.robot_id = robot_id
         self._capacity = brain.config.heard_capacity
         self._no_mail = Inbox.empty(self._capacity)
+        from swarmloc.agents.agent_tick import PackedForagingTick
+
         self._packed = (PackedForagingTick(brain, MAX_RECEIVED)
                         if packed and PackedForagingTick.supports(brain) else None)
 
@@ -131,31 +132,66 @@ class ForagingAgent:
         else:
             blob = t.no_payloads
         n = t.step(blob, m)
-        if n < 0:  # as SocialMessages.encode raises: a float32 overflow (ENCODE_FLOAT_OVERFLOW)
-            raise ValueError(f"payload: this robot's own message does not encode (code {n})")
-        for j in t.rejected(m):
-            self._reject(rows[j], errors)
-        answer = f[t.answer:t.answer + 5].tolist()
+        for j in t.rejected():
+            self._reject(rows[j].sender_id, rows[j].payload, errors)
+        return self._packed_act(sense.tick, n)
+
+    def _packed_act(self, tick: int, n: int) -> EpuckAct:
+        """The Act of the packed tick just run, whose payload length is ``n`` (-1: none)."""
+        t = self._packed
+        if n < -1:  # as SocialMessages.encode raises: a float32 overflow
+            raise ValueError(f"payload: this robot's own message does not encode (code {n + 1})")
+        answer = t.f[t.answer:t.answer + 5].tolist()
         return EpuckAct(
-            tick=sense.tick,
+            tick=tick,
             robot_id=self.robot_id,
             wheel_speed_steps_s=(answer[0], answer[1]),
-            payload=t.payload_out[:n].tobytes() if t.communicates else None,
+            payload=t.payload_out[:n].tobytes() if n >= 0 else None,
             state=int(t.i[t.state]),
             pose_estimate=(answer[2], answer[3], answer[4]),
         )
 
-    def _reject(self, msg, errors: ErrorCounter) -> None:
+    def act_wire(self, data: bytes, errors: ErrorCounter) -> bytes | None:
+        """The encoded Act answering the encoded Sense ``data``, in one compiled call
+        (agents/agent_tick.py: agent_tick_wire), or None when ``data`` is not in the world's
+        canonical form (or this brain is not packed): the shell then decodes it with the protocol
+        codec and calls :meth:`act`, which also reports what is wrong with it. The Act is the
+        one :meth:`act` would give, byte for byte (tests/test_agent_tick.py)."""
+        t = self._packed
+        if t is None:
+            return None
+        n = t.step_wire(np.frombuffer(data, np.uint8))
+        if n == t.USE_CODEC:
+            return None
+        for j in t.rejected():
+            start, (sender, size) = int(t.view["msg_start"][j]), t.view["msg_sender_len"][j].tolist()
+            self._reject(sender, data[start:start + size], errors)
+        if n == t.ACT_INVALID:  # the codec names the problem (raises)
+            return encode(self._packed_act(t.sense_tick, self._payload_length()))
+        return t.act_out[:n].tobytes()
+
+    def _payload_length(self) -> int:
+        """Length of the payload the last packed tick wrote (re-encoded for its error code)."""
+        from swarmloc.agents.social_codec import encode_payload
+
+        t, v = self._packed, self._packed.view
+        if not t.communicates:
+            return -1
+        n = encode_payload(v["known_out"][0], v["distance"][0], v["angle"][0], v["p"][0], v["heard_ids_out"][0],
+                           v["heard_bearing_out"][0], t.payload_out)
+        return n if n >= 0 else n - 1
+
+    def _reject(self, sender_id: int, payload: bytes, errors: ErrorCounter) -> None:
         """Count a teammate's payload the compiled decoder rejected, with the reference decoder's
         reason (agents/foraging.py: SocialMessages.decode, which the compiled one agrees with)."""
         from swarmloc.agents.foraging import SocialMessages
 
         try:
-            SocialMessages.decode([msg.payload], self._capacity)
+            SocialMessages.decode([payload], self._capacity)
         except ValueError as exc:
-            errors.record(f"robot {msg.sender_id}", "payload", exc)
+            errors.record(f"robot {sender_id}", "payload", exc)
         else:  # cannot happen while the two decoders agree (tests/test_social_codec.py)
-            errors.record(f"robot {msg.sender_id}", "payload", ValueError("payload: rejected by the compiled decoder"))
+            errors.record(f"robot {sender_id}", "payload", ValueError("payload: rejected by the compiled decoder"))
 
 
 class StandstillAgent:

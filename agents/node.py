@@ -6,7 +6,8 @@ with a batch of one, a laser localizer, ...), chosen by the scenario the world s
 1. join: query ``world/join`` with a ``Join``; the world answers with the scenario and run seed;
 2. subscribe to this robot's ``sense`` key, then declare its liveliness token (the world waits
    for it, so the first Sense never finds the agent deaf);
-3. on each Sense: decode, step the brain, publish the Act;
+3. on each Sense: decode, step the brain, publish the Act (a brain with ``act_wire`` answers the
+   Sense's bytes with the Act's itself, falling back to this for anything unusual);
 4. stop on ``RunEnd``, on a final Sense, on SIGINT/SIGTERM, when the world's liveliness token has
    been gone for ``world_grace_s`` (a world restarting within that time is waited for), or when
    no Sense came for ``world_timeout_s``; close the session on the way out.
@@ -83,10 +84,21 @@ class AgentNode:
         self.world_lost_at: float | None = None
         self.ticks = 0
         self._decls = []
+        #: ``act_wire(data, errors) -> bytes | None`` of brains that answer an encoded Sense with
+        #: an encoded Act themselves (None: decode it and call ``act``); see ForagingAgent.
+        self._act_wire = getattr(brain, "act_wire", None)
 
     def _on_sense(self, sample: zenoh.Sample) -> None:
+        data = sample.payload.to_bytes()
+        if self._act_wire is not None:  # bytes to bytes in one call, when the brain can
+            act = self._act_wire(data, self.errors)
+            if act is not None:
+                self.last_sense_at = time.monotonic()
+                self._act_pub.put(act)
+                self.ticks += 1
+                return
         try:
-            sense = decode(sample.payload.to_bytes(), self.brain.sense_type)
+            sense = decode(data, self.brain.sense_type)
             if sense.robot_id != self.robot_id:
                 raise ProtocolError("robot_id", f"{sense.robot_id} sent on the key of robot {self.robot_id}")
         except ProtocolError as exc:

@@ -6,8 +6,10 @@ not: every other process ran in between. This benchmark records robot 0's Senses
 in-process ES3 world (100 robots, the same bytes the world-server sends), then replays them into a
 fresh agent twice: back to back (warm), and after walking a 64 MB buffer before each tick to evict
 the CPU caches (cold). A "null" agent (decode, answer a fixed Act, encode) is the floor the brain
-adds to; "brain" is the agent as it runs (one compiled call per tick, agents/agent_tick.py),
-"reference" the same brain stepped through ForagingBrain.step. Usage:
+adds to; "wire" is the agent as it runs (Sense bytes to Act bytes in one compiled call,
+agents/agent_tick.py), "brain" the same with the protocol codec around the compiled tick (the
+path for Senses the compiled parser leaves to it), "reference" the brain stepped through
+ForagingBrain.step. Usage:
 
     python benchmarks/bench_agent_tick.py [--ticks 600] [--evict-mb 64]
 """
@@ -66,6 +68,10 @@ def main() -> int:
     def brain_tick(agent, errors, data):
         return encode(agent.act(decode(data, EpuckSense), errors))
 
+    def wire_tick(agent, errors, data):
+        act = agent.act_wire(data, errors)
+        return act if act is not None else brain_tick(agent, errors, data)
+
     def null_tick(agent, errors, data):
         decode(data, EpuckSense)
         return encode(null_act)
@@ -85,7 +91,7 @@ def main() -> int:
     with_mail = sum(1 for d in senses if decode(d, EpuckSense).received) / len(senses)
     print(f"robot 0 of ES3, {len(senses)} ticks, {with_mail:.0%} of them with received messages")
     print(f"{'agent':>10} {'warm us/tick':>13} {'cold us/tick':>13}")
-    for name, tick, packed in (("null", null_tick, True), ("brain", brain_tick, True),
+    for name, tick, packed in (("null", null_tick, True), ("wire", wire_tick, True), ("brain", brain_tick, True),
                                ("reference", brain_tick, False)):
         warm = min(per_tick_us(tick, False, packed) for _ in range(3))
         cold = min(per_tick_us(tick, True, packed) for _ in range(3))

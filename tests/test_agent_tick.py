@@ -22,7 +22,7 @@ from swarmloc.agents.social_odometry import STRATEGIES
 from swarmloc.deploy.scenario import load_any
 from swarmloc.protocol.epuck import STATE_KNOWS_BOTH
 from swarmloc.protocol.errors import ErrorCounter
-from swarmloc.protocol.messages import EpuckSense, RabMessage, decode
+from swarmloc.protocol.messages import EpuckSense, RabMessage, decode, encode
 from swarmloc.world.service import served_world
 
 
@@ -48,9 +48,9 @@ def test_packed_tick_gives_the_reference_acts(strategy):
     loaded = load_any("ES1", {"seed": 3}, [f'agent.strategy="{strategy}"', "world.robots=10"])
     sc = loaded.scenario
     world = served_world(loaded)
-    packed, reference = _agents(sc, True), _agents(sc, False)
+    packed, wire, reference = _agents(sc, True), _agents(sc, True), _agents(sc, False)
     assert all(a._packed is not None for a in packed) and all(a._packed is None for a in reference)
-    errors_packed, errors_reference = ErrorCounter(), ErrorCounter()
+    errors_packed, errors_wire, errors_reference = ErrorCounter(), ErrorCounter(), ErrorCounter()
     heard = sent = 0
     for tick in range(600):
         acts = []
@@ -58,11 +58,13 @@ def test_packed_tick_gives_the_reference_acts(strategy):
             sense = _corrupt(decode(data, EpuckSense), tick)
             act = packed[rid].act(sense, errors_packed)
             assert act == reference[rid].act(sense, errors_reference), f"robot {rid}, tick {tick}"
+            # bytes to bytes: the Sense as the world encodes it, the Act as the codec would
+            assert wire[rid].act_wire(encode(sense), errors_wire) == encode(act), f"robot {rid}, tick {tick}"
             heard += len(sense.received)
             sent += act.payload is not None
             acts.append(act)
         world.step(acts)
-    assert dict(errors_packed.counts) == dict(errors_reference.counts)
+    assert dict(errors_packed.counts) == dict(errors_reference.counts) == dict(errors_wire.counts)
     # the run exercised what it is meant to: messages heard, some of them spoilt and rejected
     if STRATEGIES[strategy].communicates:
         assert heard > 100 and sum(errors_packed.counts.values()) > 5 and sent == 600 * 10
@@ -102,3 +104,20 @@ def test_a_full_inbox_of_sixteen_messages_is_decoded():
     assert not errors.counts
     # the robot adopted a neighbour's goals: it now knows both and says so in its state code
     assert act.state & STATE_KNOWS_BOTH
+
+
+def test_a_sense_the_wire_path_does_not_take_is_left_to_the_codec_untouched():
+    """A final Sense, or one addressed to another robot, is not answered by act_wire (None) and
+    changes nothing: the shell then decodes it and calls act, which still matches the reference."""
+    loaded = load_any("ES1", {"seed": 2}, ["world.robots=1"])
+    sc = loaded.scenario
+    (agent,), (reference,) = _agents(sc, True), _agents(sc, False)
+    sense = EpuckSense(tick=0, robot_id=0, encoder_steps=(3.0, 4.0), ir=(0.1,) * 8, ground=(1.0, 1.0, 1.0),
+                       received=())
+    errors = ErrorCounter()
+    for other in (dataclasses.replace(sense, final=True), dataclasses.replace(sense, robot_id=1), b"\x93\x01"):
+        assert agent.act_wire(other if isinstance(other, bytes) else encode(other), errors) is None
+    assert agent._packed.tick == 0 and not errors.counts
+    assert agent.act(sense, errors) == reference.act(sense, ErrorCounter())
+    assert agent.act_wire(encode(dataclasses.replace(sense, tick=1)), errors) == encode(
+        reference.act(dataclasses.replace(sense, tick=1), ErrorCounter()))
