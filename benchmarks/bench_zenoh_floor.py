@@ -11,9 +11,13 @@ it, as ``swarmloc run`` does) and ``router`` (a separate Python router process i
 ZENOH.md's pieces on several hosts). Compare the figures with `benchmarks/bench_lockstep.py`, the
 same swarm sizes with the real world-server and e-puck agents. ``--codec`` adds swarmloc's codec
 and nothing else: each robot also decodes an e-puck Sense of 389 bytes (two received
-messages; a recorded ES3 Sense averages 312 bytes) and builds and encodes an Act, every tick. Usage:
+messages; a recorded ES3 Sense averages 312 bytes) and builds and encodes an Act, every tick.
+``--one-thread-robots`` runs the robots on the Zenoh runtime swarmloc's e-puck agents use
+(``deploy/launch.py: ONE_THREAD_ZENOH_RUNTIME``); the default is Zenoh's own, the floor the issue
+names. Usage:
 
     python benchmarks/bench_zenoh_floor.py [--robots 10 50 100] [--duration-s 20] [--topology direct] [--codec]
+    python benchmarks/bench_zenoh_floor.py --robots 100 --one-thread-robots
 """
 
 from __future__ import annotations
@@ -29,6 +33,8 @@ import threading
 import time
 
 import zenoh
+
+from swarmloc.deploy.launch import ONE_THREAD_ZENOH_RUNTIME
 
 PAYLOAD_BYTES = 100
 
@@ -108,7 +114,7 @@ def robot(endpoint: str, run: str, robot_id: int, codec: bool = False) -> int:
     return 0
 
 
-def world(n: int, duration_s: float, topology: str, codec: bool = False) -> dict:
+def world(n: int, duration_s: float, topology: str, codec: bool = False, one_thread: bool = False) -> dict:
     run = f"r{os.getpid()}x{n}"
     procs: list[subprocess.Popen] = []
     try:
@@ -133,7 +139,9 @@ def world(n: int, duration_s: float, topology: str, codec: bool = False) -> dict
             live = session.liveliness().declare_subscriber(f"floor/{run}/alive/*", on_alive, history=True)
             robots = [subprocess.Popen([sys.executable, __file__, "--robot", str(i), "--connect", robot_ep,
                                         "--run", run, *(["--codec"] if codec else [])],
-                                       start_new_session=True, stdout=subprocess.PIPE, text=True)
+                                       start_new_session=True, stdout=subprocess.PIPE, text=True,
+                                       env={**os.environ, "ZENOH_RUNTIME": ONE_THREAD_ZENOH_RUNTIME}
+                                       if one_thread else None)
                       for i in range(n)]
             procs.extend(robots)
             if not joined.wait(120):
@@ -212,16 +220,19 @@ def main() -> int:
     parser.add_argument("--serve-router", help=argparse.SUPPRESS)
     parser.add_argument("--codec", action="store_true",
                         help="robots also decode an e-puck Sense and encode an Act every tick")
+    parser.add_argument("--one-thread-robots", action="store_true",
+                        help="robots run Zenoh's pools on one thread, as swarmloc's e-puck agents do")
     args = parser.parse_args()
     if args.serve_router:
         return serve_router(args.serve_router)
     if args.robot is not None:
         return robot(args.connect, args.run, args.robot, args.codec)
     print(f"plain Zenoh lockstep floor, topology {args.topology}, {PAYLOAD_BYTES}-byte messages"
-          + (", robots decode a Sense and encode an Act" if args.codec else ""))
+          + (", robots decode a Sense and encode an Act" if args.codec else "")
+          + (", robots on a one-thread Zenoh runtime" if args.one_thread_robots else ""))
     print(f"{'robots':>6} {'ticks':>6} {'ticks/s':>8} {'p50 ms':>7} {'p99 ms':>7} {'world CPU ms/tick':>18} {'robot CPU us/tick':>18}")
     for n in args.robots:
-        r = world(n, args.duration_s, args.topology, args.codec)
+        r = world(n, args.duration_s, args.topology, args.codec, args.one_thread_robots)
         print(f"{r['robots']:>6} {r['ticks']:>6} {r['ticks_per_s']:>8.1f} {r['p50_ms']:>7.2f} {r['p99_ms']:>7.2f} "
               f"{r['world_cpu_ms_per_tick']:>18.2f} {r['robot_cpu_us_per_tick']:>18.0f}", flush=True)
     return 0
