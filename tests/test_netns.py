@@ -110,7 +110,9 @@ def test_reliable_links_at_20_percent_loss_give_the_lossless_metrics(lab, tmp_pa
 def test_best_effort_links_complete_without_deadlock_and_count_what_was_lost(lab, tmp_path):
     """UDP endpoints: lost packets stay lost. The loss is switched on once the run ticks (over
     UDP the session handshake and declarations suffer from it too, and startup takes minutes)."""
-    scenario = lab_scenario(ROBOTS, duration_s=15.0, seed=5)
+    # 400 ticks: lossless lockstep ticks take about a millisecond, and switching the loss on in
+    # every namespace takes longer than a 150-tick run had left (it ended with 2 packets dropped).
+    scenario = lab_scenario(ROBOTS, duration_s=40.0, seed=5)
     path = tmp_path / "scenario.json"
     path.write_text(json.dumps(scenario.to_dict()))
     lab.set_loss(0.0)
@@ -126,7 +128,7 @@ def test_best_effort_links_complete_without_deadlock_and_count_what_was_lost(lab
     assert code == 0, "the world did not complete its run"
     result = json.loads((out / "results.json").read_text())
     t = result["transport"]
-    assert result["reason"] == "completed" and t["ticks"] == 150
+    assert result["reason"] == "completed" and t["ticks"] == 400
     lossy_ticks = t["ticks"] - first["tick"]
     print(f"best effort, 20 % loss: {t['late_acts']} of {ROBOTS * t['ticks']} robot-ticks without "
           f"an act ({lossy_ticks} ticks under loss), {t['stale_acts']} acts too late; "
