@@ -41,6 +41,7 @@ class ForagingAgent:
     def __init__(self, brain, robot_id: int, *, packed: bool = True) -> None:
         """``packed``: step the brain as one compiled call per tick (agents/agent_tick.py) when it
         qualifies; else, or if False, through ``ForagingBrain.step``. Both give the same Acts."""
+        from swarmloc.agents.agent_tick import PackedForagingTick
         from swarmloc.agents.foraging import Inbox
 
         self.brain = brain
@@ -48,8 +49,6 @@ class ForagingAgent:
         self.robot_id = robot_id
         self._capacity = brain.config.heard_capacity
         self._no_mail = Inbox.empty(self._capacity)
-        from swarmloc.agents.agent_tick import PackedForagingTick
-
         self._packed = (PackedForagingTick(brain, MAX_RECEIVED)
                         if packed and PackedForagingTick.supports(brain) else None)
 
@@ -115,7 +114,6 @@ class ForagingAgent:
             state=int(out.state[0]),
             pose_estimate=tuple(out.pose_estimate[0].tolist()),
         )
-
 
     def _act_packed(self, sense: EpuckSense, errors: ErrorCounter) -> EpuckAct:
         """``act`` as one compiled call (agents/agent_tick.py); the few Python operations here
