@@ -27,14 +27,15 @@ import numpy as np
 from numba import njit
 
 from swarmloc.agents import kernels
-from swarmloc.agents.epuck_wire import encode_act, parse_sense
+from swarmloc.agents.epuck_wire import N_PERCEPTS, encode_act, parse_sense
 from swarmloc.agents.foraging import _COS_IR, _SIN_IR
 from swarmloc.agents.social_codec import decode_payload, encode_payload
 
 #: Header slots of the int buffer: robots, heard capacity, encounter memory, inbox capacity, the
-#: tick count, how many payloads the last tick rejected, how many messages it received, and the
-#: tick number of the last Sense parsed by :func:`agent_tick_wire`.
-H_N, H_K, H_E, H_M, H_TICK, H_BAD, H_MESSAGES, H_SENSE_TICK, N_HEADER = range(9)
+#: tick count, how many payloads the last tick rejected, how many messages it received, the
+#: tick number of the last Sense parsed by :func:`agent_tick_wire`, and what :func:`_tick`
+#: returned (the robot's payload length, -1 for none, below -1 an encoding error).
+H_N, H_K, H_E, H_M, H_TICK, H_BAD, H_MESSAGES, H_SENSE_TICK, H_PAYLOAD, N_HEADER = range(10)
 #: :func:`agent_tick_wire`'s answers besides an Act's length: the Sense is not in the form the
 #: compiled parser takes (nothing done: decode it with the protocol codec instead); the tick ran
 #: but its Act or payload does not encode (build it from the outputs: the codec says why).
@@ -271,10 +272,12 @@ def _tick(f, i, b, buf, payload_out):
     frame_pose[:] = pose
     pose[:] = new_pose
     if settings[kernels.S_COMMUNICATES] == 0:
+        header[H_PAYLOAD] = -1
         return -1
     n = encode_payload(known_out[0], distance[0], angle[0], p[0], heard_ids_out[0], heard_bearing_out[0],
                        payload_out)
-    return n if n >= 0 else n - 1
+    header[H_PAYLOAD] = n if n >= 0 else n - 1
+    return header[H_PAYLOAD]
 
 
 @njit(cache=True, error_model="numpy")
@@ -301,7 +304,7 @@ def agent_tick_wire(f, i, b, sense, payload_out, act_out):
     ``WIRE_ACT_INVALID`` if the payload or the Act does not encode."""
     fv, iv, _, _ = _views(f, i, b)
     header, robot_ids, msg_sender_len, msg_start = iv[I_HEADER], iv[I_ROBOT_IDS], iv[I_SENDER_LEN], iv[I_START]
-    n = parse_sense(sense, robot_ids[0], f[:13], fv[F_RANGE_BEARING], msg_sender_len, msg_start,
+    n = parse_sense(sense, robot_ids[0], f[:N_PERCEPTS], fv[F_RANGE_BEARING], msg_sender_len, msg_start,
                     header[H_SENSE_TICK:H_SENSE_TICK + 1])
     if n < 0:
         return WIRE_USE_CODEC
@@ -345,7 +348,7 @@ class PackedForagingTick:
         n, k, e = 1, brain.config.heard_capacity, brain.config.encounter_memory
         size = 256 + 64 * k + max_messages * (16 + 8 * k)
         self.f, self.i, self.b = np.zeros(size), np.zeros(size, np.int64), np.zeros(size, bool)
-        self.i[:N_HEADER] = (n, k, e, max_messages, brain.tick, 0, 0, 0)
+        self.i[:N_HEADER] = (n, k, e, max_messages, brain.tick, 0, 0, 0, -1)
         fv, iv, bv, extents = _views(self.f, self.i, self.b)
         if not all(x <= size for x in extents):  # the buffers' sizes are generous; check they are enough
             raise AssertionError(f"packed brain needs {extents}, buffers have {size}")
@@ -366,15 +369,13 @@ class PackedForagingTick:
         v["math_fns"][...] = brain._math
         v["cos_ir"][...], v["sin_ir"][...] = _COS_IR, _SIN_IR
         v["content_row"][...] = np.arange(max_messages)
-        self.max_messages = max_messages
-        self.communicates = bool(brain.strategy.communicates)
         self.payload_out = np.zeros(64, np.uint8)
         self.act_out = np.zeros(256, np.uint8)
         # Read-only, as np.frombuffer(bytes) makes the inbox's: one type, one compiled agent_tick.
         self.no_payloads = np.frombuffer(b"", np.uint8)
         # Offsets (in items) of what the agent shell reads and writes each tick.
-        self.percepts = _offset(v["encoder_steps"], self.f)  # encoder, ir, ground: 13 floats
-        if self.percepts != 0:  # agent_tick_wire has the parser write them to f[:13]
+        self.percepts = _offset(v["encoder_steps"], self.f)  # encoder, ir, ground: N_PERCEPTS floats
+        if self.percepts != 0:  # agent_tick_wire has the parser write them to f[:N_PERCEPTS]
             raise AssertionError("the percepts must open the float buffer")
         self.range_bearing = _offset(v["msg_range_bearing"], self.f)
         self.sender_len = _offset(v["msg_sender_len"], self.i)
@@ -382,6 +383,7 @@ class PackedForagingTick:
         self.state = _offset(v["state"], self.i)
 
     USE_CODEC, ACT_INVALID = WIRE_USE_CODEC, WIRE_ACT_INVALID
+    N_PERCEPTS = N_PERCEPTS
 
     @staticmethod
     def supports(brain) -> bool:
@@ -399,6 +401,12 @@ class PackedForagingTick:
     @property
     def tick(self) -> int:
         return int(self.i[H_TICK])
+
+    @property
+    def payload_length(self) -> int:
+        """What the last tick's payload encoding gave: its length, -1 for none, below -1 the
+        code of an encoding error."""
+        return int(self.i[H_PAYLOAD])
 
     @property
     def sense_tick(self) -> int:

@@ -120,7 +120,7 @@ class ForagingAgent:
         are the whole per-tick cost around it, so they are kept few."""
         t = self._packed
         f = t.f
-        f[t.percepts:t.percepts + 13] = (*sense.encoder_steps, *sense.ir, *sense.ground)
+        f[t.percepts:t.percepts + t.N_PERCEPTS] = (*sense.encoder_steps, *sense.ir, *sense.ground)
         rows = sense.received
         m = len(rows)
         if m:
@@ -165,19 +165,8 @@ class ForagingAgent:
             start, (sender, size) = int(t.view["msg_start"][j]), t.view["msg_sender_len"][j].tolist()
             self._reject(sender, data[start:start + size], errors)
         if n == t.ACT_INVALID:  # the codec names the problem (raises)
-            return encode(self._packed_act(t.sense_tick, self._payload_length()))
+            return encode(self._packed_act(t.sense_tick, t.payload_length))
         return t.act_out[:n].tobytes()
-
-    def _payload_length(self) -> int:
-        """Length of the payload the last packed tick wrote (re-encoded for its error code)."""
-        from swarmloc.agents.social_codec import encode_payload
-
-        t, v = self._packed, self._packed.view
-        if not t.communicates:
-            return -1
-        n = encode_payload(v["known_out"][0], v["distance"][0], v["angle"][0], v["p"][0], v["heard_ids_out"][0],
-                           v["heard_bearing_out"][0], t.payload_out)
-        return n if n >= 0 else n - 1
 
     def _reject(self, sender_id: int, payload: bytes, errors: ErrorCounter) -> None:
         """Count a teammate's payload the compiled decoder rejected, with the reference decoder's
