@@ -23,11 +23,16 @@ from __future__ import annotations
 
 import msgpack
 import numpy as np
-from llvmlite import ir as llvm_ir
-from numba import njit, types
-from numba.extending import intrinsic
+from numba import njit
 
-from swarmloc.agents.social_codec import _f64_from_bits, _get_be, _put_be, _put_uint, _uint_size
+from swarmloc.agents.social_codec import (
+    _bits_of_f64,
+    _f64_from_bits,
+    _get_be,
+    _put_be,
+    _put_uint,
+    _uint_size,
+)
 from swarmloc.protocol.messages import (
     _FIELD_SPECS,
     MAX_MESSAGE_BYTES,
@@ -149,18 +154,6 @@ _T_STATE = _token(_key("state"))
 _T_POSE = _token(_key("pose_estimate") + _array_header(3))
 
 _NIL, _FALSE, _TRUE, _BIN8, _FLOAT64, _ARRAY16 = 0xC0, 0xC2, 0xC3, 0xC4, 0xCB, 0xDC
-
-
-@intrinsic
-def _bits_of_f64(typingctx, value):
-    """The IEEE bits of the float64 ``value``, as a uint64."""
-    if value != types.float64:
-        return None
-
-    def codegen(context, builder, signature, args):
-        return builder.bitcast(args[0], llvm_ir.IntType(64))
-
-    return types.uint64(value), codegen
 
 
 # ------------------------------------------------------------------------------------ parse

@@ -92,6 +92,18 @@ def _bits_of_f32(typingctx, value):
     return types.uint32(value), codegen
 
 
+@intrinsic
+def _bits_of_f64(typingctx, value):
+    """The IEEE bits of the float64 ``value``, as a uint64."""
+    if value != types.float64:
+        return None
+
+    def codegen(context, builder, signature, args):
+        return builder.bitcast(args[0], llvm_ir.IntType(64))
+
+    return types.uint64(value), codegen
+
+
 # ----------------------------------------------------------------------------------------- encode
 
 
