@@ -13,6 +13,7 @@ import signal
 import subprocess
 import sys
 import threading
+import time
 import uuid
 from pathlib import Path
 
@@ -91,9 +92,17 @@ class WorldWatch:
         self.session.close()
 
 
-def _environ(pid: int) -> dict[str, str]:
-    """The environment a running process was started with."""
-    raw = Path(f"/proc/{pid}/environ").read_bytes()
+def _environ(pid: int, timeout_s: float = 10.0) -> dict[str, str]:
+    """The environment a running process was started with.
+
+    Popen returns once the child's exec has begun (its close-on-exec pipe closed), but the
+    kernel sets up the new image's environment a little later: until then /proc/PID/environ
+    reads empty. Every child of the supervisor has a non-empty environment (launch.py:
+    CHILD_ENV), so an empty read means "not yet" and is read again until ``timeout_s``."""
+    deadline = time.monotonic() + timeout_s
+    while not (raw := Path(f"/proc/{pid}/environ").read_bytes()):
+        assert time.monotonic() < deadline, f"process {pid} shows no environment after {timeout_s} s"
+        time.sleep(0.01)
     return dict(item.decode().partition("=")[::2] for item in raw.split(b"\0") if item)
 
 
