@@ -10,6 +10,7 @@ kernel on the same values.
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import msgpack
 import numpy as np
@@ -121,3 +122,32 @@ def test_a_sense_the_wire_path_does_not_take_is_left_to_the_codec_untouched():
     assert agent.act(sense, errors) == reference.act(sense, ErrorCounter())
     assert agent.act_wire(encode(dataclasses.replace(sense, tick=1)), errors) == encode(
         reference.act(dataclasses.replace(sense, tick=1), ErrorCounter()))
+
+
+
+def test_estimates_beyond_float32_still_give_an_act_on_every_path():
+    """Why no Act of a brain fails to encode: the brain rounds what it sends to float32 itself
+    (agents/kernels.py: report_into), infinity where a value overflows, and the heard bearings it
+    sends back are ones the codec bounded to [-pi, pi]. Goals at 1e39 m (a state no run reaches)
+    go out as infinite distances, the same bytes on the packed, wire and reference paths."""
+    loaded = load_any("ES1", {"seed": 4}, ['agent.strategy="SSGIKF"', "world.robots=1"])
+    sc = loaded.scenario
+    agents = []
+    for packed in (True, True, False):
+        brain = ForagingBrain(sc.agent, sc.world.body, [0], [agent_rng(sc.world.seed, 0)], sc.world.tick_s)
+        brain.known[0] = True
+        brain.goal_xy[0] = [[1e39, 0.0], [0.0, -1e39]]
+        agents.append(ForagingAgent(brain, 0, packed=packed))
+    packed, wire, reference = agents
+    assert packed._packed is not None and reference._packed is None
+    errors = ErrorCounter()
+    sense = EpuckSense(tick=0, robot_id=0, encoder_steps=(3.0, 4.0), ir=(0.1,) * 8, ground=(1.0, 1.0, 1.0),
+                       received=())
+    for tick in range(5):
+        this = dataclasses.replace(sense, tick=tick)
+        act = reference.act(this, errors)
+        assert packed.act(this, errors) == act
+        assert wire.act_wire(encode(this), errors) == encode(act)
+        flags, nest_m, _, _, prey_m, _, _, heard = msgpack.unpackb(act.payload)
+        assert (flags, nest_m, prey_m, heard) == (3, math.inf, math.inf, [])
+    assert not errors.counts
