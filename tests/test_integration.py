@@ -290,15 +290,15 @@ def test_sigterm_to_swarmloc_run_stops_every_piece(tmp_path):
         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
     )
     try:
-        # Readiness: the last agent's log exists once every piece has been started.
+        # Readiness: the launcher has started every piece, router, world and 3 agents. (Not the
+        # last agent's log file: the launcher opens it just before it starts that agent.)
         deadline = time.monotonic() + 60
-        last_log = out / run / "logs" / "agent-2.log"
-        while not last_log.exists():
-            assert time.monotonic() < deadline, "the swarm never started"
+        while len(pieces := _children(proc.pid)) < 5:
+            assert time.monotonic() < deadline, f"the swarm never started: {len(pieces)} pieces"
             assert proc.poll() is None, "swarmloc run exited early"
-            time.sleep(0.05)  # polling a file for readiness, bounded by the deadline
-        pieces = _children(proc.pid)
-        assert len(pieces) == 5  # router, world, 3 agents
+            time.sleep(0.05)  # polling /proc for readiness, bounded by the deadline
+        assert len(pieces) == 5, f"{len(pieces)} children of swarmloc run, not router, world and 3 agents"
+        assert (out / run / "logs" / "agent-2.log").exists()
         proc.send_signal(signal.SIGTERM)
         assert proc.wait(timeout=30) != 0
         deadline = time.monotonic() + 10
