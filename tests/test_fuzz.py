@@ -21,15 +21,22 @@ During a lockstep run (router, world and agents as separate processes, ``start_s
 
 Everything is sent before a marker; the marker's arrival (on a second session) proves that the
 world's router had handed all fuzz to the world's act queue and to the agent's link, which both
-process in order, and the run must still have ticks to go at that point (asserted).
+process in order, and the run must still have ticks to go at that point (asserted). To make sure it
+has, whatever the machine's load, the test holds the run while the fuzz goes in: it stops another
+agent's process (SIGSTOP) once the run ticks, and the lockstep world waits for that robot's act
+until the marker has arrived (SIGCONT). Every piece gets a Zenoh lease, an act timeout and a
+world timeout longer than that hold can last. (Without the hold, a loaded machine once finished
+the 12,000 ticks while half the join queries were still to be sent.)
 """
 
 from __future__ import annotations
 
 import ast
 import json
+import os
 import random
 import re
+import signal
 import threading
 import time
 import uuid
@@ -42,6 +49,7 @@ import zenoh
 
 from swarmloc.deploy.batch import run_batch
 from swarmloc.deploy.launch import supervised
+from swarmloc.deploy.netns import write_lease_config
 from swarmloc.deploy.run import start_swarm
 from swarmloc.deploy.scenario import load_scenario
 from swarmloc.protocol.keys import Keys
@@ -329,8 +337,8 @@ def _send_joins(session, keys: Keys, payloads: list[bytes], in_flight: int = 64)
 
 @pytest.mark.integration
 def test_a_real_run_refuses_and_counts_100k_bad_messages_and_is_unchanged(tmp_path):
-    # Long enough (12,000 ticks) that all the fuzz is in while the run still ticks: with the
-    # compiled kernels a 3-robot world runs several hundred ticks per second.
+    # 12,000 ticks: long enough for the robots to forage, so that metrics equal to the batch
+    # engine's say something (the hold below, not the length, keeps the run ticking past the fuzz).
     scenario = load_scenario("ES1", [f"world.robots={ROBOTS}", "world.duration_s=1200.0", "world.seed=11"])
     path = tmp_path / "scenario.json"
     path.write_text(json.dumps(scenario.to_dict()))
@@ -349,18 +357,26 @@ def test_a_real_run_refuses_and_counts_100k_bad_messages_and_is_unchanged(tmp_pa
 
     marker_key = f"{keys.prefix}/fuzz/marker"
     out = tmp_path / "out"
+    # Longer than the hold below can last, however loaded the machine: the held agent's link, the
+    # world's wait for its act, and the other agents' wait for their next Sense.
+    hold_s = "600"
+    lease = ("-c", str(write_lease_config(tmp_path / "zenoh-lease.json5", float(hold_s))))
+    agent_args = ("--world-timeout-s", hold_s, *lease)
     with supervised() as sup:
         # The agents of robots 0..N-2 as `swarmloc run` starts them; the fuzzed one with -v, so
         # that it logs its rejection counts when it ends. The world waits for all of them.
         swarm = start_swarm(sup, path, run=run, robots=ROBOTS - 1, out=out, log_dir=tmp_path,
-                            join_timeout_s=60, world_args=("--act-timeout-s", "60"))
+                            join_timeout_s=60, world_args=("--act-timeout-s", hold_s, *lease),
+                            agent_args=agent_args)
         fuzzed = sup.start(["-v", "agent", "--robot", str(FUZZED_AGENT), "-m", "client", "-e",
-                            swarm.world_endpoint, "--run", run, "--join-timeout-s", "60"],
+                            swarm.world_endpoint, "--run", run, "--join-timeout-s", "60", *agent_args],
                            log_path=tmp_path / f"agent-{FUZZED_AGENT}.log")
         observer = Observer(swarm.world_endpoint, keys, marker_key)
         fuzz = open_session(session_config(mode="client", connect=[swarm.world_endpoint]))
+        held = swarm.agents[0]
         try:
             assert observer.started.wait(60), "the run never started"
+            os.kill(held.pid, signal.SIGSTOP)  # the run waits for robot 0's act from here
             t1 = time.perf_counter()
             block = zenoh.CongestionControl.BLOCK
             sense_key = keys.sense(FUZZED_AGENT)
@@ -373,9 +389,11 @@ def test_a_real_run_refuses_and_counts_100k_bad_messages_and_is_unchanged(tmp_pa
             fuzz.put(marker_key, b"done", congestion_control=block)
             assert observer.marker.wait(60), "the marker never arrived"
             sent_s = time.perf_counter() - t1
+            os.kill(held.pid, signal.SIGCONT)
             assert swarm.world.wait(timeout=180) == 0
             assert fuzzed.wait(timeout=30) in (0, 3)
         finally:
+            os.kill(held.pid, signal.SIGCONT)  # a stopped process would not see the supervisor's SIGTERM
             fuzz.close()
             observer.session.close()
     result = json.loads((out / "results.json").read_text())
