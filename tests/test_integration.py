@@ -280,8 +280,6 @@ def _alive(pids: list[int]) -> list[int]:
 
 
 def test_sigterm_to_swarmloc_run_stops_every_piece(tmp_path):
-    import time
-
     run = "term" + uuid.uuid4().hex[:8]
     out = tmp_path / "runs"
     proc = subprocess.Popen(
@@ -338,8 +336,6 @@ def test_restarted_agent_rejoins_its_robot(tmp_path):
 
 
 def test_agents_exit_cleanly_when_the_world_dies_and_its_results_so_far_are_intact(tmp_path):
-    import time
-
     _, path = _scenario(tmp_path, ["world.robots=3", "world.duration_s=6000.0"])
     with supervised() as sup:
         swarm = Swarm(sup, tmp_path, path, robots=3, world_args=("--checkpoint-s", "0.5"))
@@ -363,8 +359,6 @@ def test_agents_exit_cleanly_when_the_world_dies_and_its_results_so_far_are_inta
 
 
 def test_sigterm_ends_each_piece_within_a_second(tmp_path):
-    import time
-
     _, path = _scenario(tmp_path, ["world.robots=2", "world.duration_s=6000.0"])
     with supervised() as sup:
         swarm = Swarm(sup, tmp_path, path, robots=2)
