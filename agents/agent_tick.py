@@ -69,141 +69,103 @@ I_HEADER, I_ROBOT_IDS, I_SENDER_LEN, I_START, I_STATE = (
 
 
 @njit(cache=True, error_model="numpy")
+def _take(buf, o, size):
+    """``size`` items of the buffer ``buf`` from offset ``o``, and the offset after them."""
+    return buf[o:o + size], o + size
+
+
+@njit(cache=True, error_model="numpy")
+def _take2(buf, o, a, b):
+    """As :func:`_take`, shaped ``(a, b)``."""
+    return buf[o:o + a * b].reshape((a, b)), o + a * b
+
+
+@njit(cache=True, error_model="numpy")
+def _take3(buf, o, a, b, c):
+    """As :func:`_take`, shaped ``(a, b, c)``."""
+    return buf[o:o + a * b * c].reshape((a, b, c)), o + a * b * c
+
+
+@njit(cache=True, error_model="numpy")
+def _take4(buf, o, a, b, c, d):
+    """As :func:`_take`, shaped ``(a, b, c, d)``."""
+    return buf[o:o + a * b * c * d].reshape((a, b, c, d)), o + a * b * c * d
+
+
+@njit(cache=True, error_model="numpy")
 def _views(f, i, b):
     """The arrays of a packed brain, as views into its buffers ``f`` (float64), ``i`` (int64) and
     ``b`` (bool), sized by the header ``i[:N_HEADER]``; then the extent used of each buffer."""
     n, k, e, mm = i[H_N], i[H_K], i[H_E], i[H_M]
     o = 0
-    encoder_steps = f[o:o + 2 * n].reshape((n, 2))
-    o += 2 * n
-    ir = f[o:o + 8 * n].reshape((n, 8))
-    o += 8 * n
-    ground = f[o:o + 3 * n].reshape((n, 3))
-    o += 3 * n
-    pose = f[o:o + 3 * n].reshape((n, 3))
-    o += 3 * n
-    frame_pose = f[o:o + 3 * n].reshape((n, 3))
-    o += 3 * n
-    new_pose = f[o:o + 3 * n].reshape((n, 3))
-    o += 3 * n
-    goal_xy = f[o:o + 4 * n].reshape((n, 2, 2))
-    o += 4 * n
-    goal_p_m = f[o:o + 2 * n].reshape((n, 2))
-    o += 2 * n
-    goal_cov = f[o:o + 18 * n].reshape((n, 2, 3, 3))
-    o += 18 * n
-    search_left_m = f[o:o + n]
-    o += n
-    turn_dir = f[o:o + n]
-    o += n
-    heard_bearing_rad = f[o:o + k * n].reshape((n, k))
-    o += k * n
-    heard_range_m = f[o:o + k * n].reshape((n, k))
-    o += k * n
-    params = f[o:o + kernels.N_BRAIN_PARAMS]
-    o += kernels.N_BRAIN_PARAMS
-    cos_ir = f[o:o + 8]
-    o += 8
-    sin_ir = f[o:o + 8]
-    o += 8
-    geometry = f[o:o + 6 * n].reshape((2, n, 3))
-    o += 6 * n
-    atan = f[o:o + 3 * n].reshape((n, 3))
-    o += 3 * n
-    msg_range_bearing = f[o:o + 2 * mm].reshape((mm, 2))
-    o += 2 * mm
-    in_range_m = f[o:o + mm]
-    o += mm
-    in_bearing_rad = f[o:o + mm]
-    o += mm
-    c_distance = f[o:o + 2 * mm].reshape((mm, 2))
-    o += 2 * mm
-    c_angle = f[o:o + 2 * mm].reshape((mm, 2))
-    o += 2 * mm
-    c_p = f[o:o + 2 * mm].reshape((mm, 2))
-    o += 2 * mm
-    c_heard_bearing = f[o:o + k * mm].reshape((mm, k))
-    o += k * mm
-    cmd = f[o:o + 2 * n].reshape((n, 2))
-    o += 2 * n
-    pose_out = f[o:o + 3 * n].reshape((n, 3))
-    o += 3 * n
-    distance = f[o:o + 2 * n].reshape((n, 2))
-    o += 2 * n
-    angle = f[o:o + 2 * n].reshape((n, 2))
-    o += 2 * n
-    p = f[o:o + 2 * n].reshape((n, 2))
-    o += 2 * n
-    heard_bearing_out = f[o:o + k * n].reshape((n, k))
-    o += k * n
+    encoder_steps, o = _take2(f, o, n, 2)
+    ir, o = _take2(f, o, n, 8)
+    ground, o = _take2(f, o, n, 3)
+    pose, o = _take2(f, o, n, 3)
+    frame_pose, o = _take2(f, o, n, 3)
+    new_pose, o = _take2(f, o, n, 3)
+    goal_xy, o = _take3(f, o, n, 2, 2)
+    goal_p_m, o = _take2(f, o, n, 2)
+    goal_cov, o = _take4(f, o, n, 2, 3, 3)
+    search_left_m, o = _take(f, o, n)
+    turn_dir, o = _take(f, o, n)
+    heard_bearing_rad, o = _take2(f, o, n, k)
+    heard_range_m, o = _take2(f, o, n, k)
+    params, o = _take(f, o, kernels.N_BRAIN_PARAMS)
+    cos_ir, o = _take(f, o, 8)
+    sin_ir, o = _take(f, o, 8)
+    geometry, o = _take3(f, o, 2, n, 3)
+    atan, o = _take2(f, o, n, 3)
+    msg_range_bearing, o = _take2(f, o, mm, 2)
+    in_range_m, o = _take(f, o, mm)
+    in_bearing_rad, o = _take(f, o, mm)
+    c_distance, o = _take2(f, o, mm, 2)
+    c_angle, o = _take2(f, o, mm, 2)
+    c_p, o = _take2(f, o, mm, 2)
+    c_heard_bearing, o = _take2(f, o, mm, k)
+    cmd, o = _take2(f, o, n, 2)
+    pose_out, o = _take2(f, o, n, 3)
+    distance, o = _take2(f, o, n, 2)
+    angle, o = _take2(f, o, n, 2)
+    p, o = _take2(f, o, n, 2)
+    heard_bearing_out, o = _take2(f, o, n, k)
     f_extent = o
 
     o = 0
-    header = i[o:o + N_HEADER]
-    o += N_HEADER
-    robot_ids = i[o:o + n]
-    o += n
-    target = i[o:o + n]
-    o += n
-    lost_count = i[o:o + n]
-    o += n
-    visit_ticks = i[o:o + 2 * n].reshape((n, 2))
-    o += 2 * n
-    turn_ticks = i[o:o + n]
-    o += n
-    straight_ticks = i[o:o + n]
-    o += n
-    heard_ids = i[o:o + k * n].reshape((n, k))
-    o += k * n
-    partner_ids = i[o:o + e * n].reshape((n, e))
-    o += e * n
-    partner_until = i[o:o + e * n].reshape((n, e))
-    o += e * n
-    settings = i[o:o + kernels.N_SETTINGS]
-    o += kernels.N_SETTINGS
-    math_fns = i[o:o + 3]
-    o += 3
-    rng_fn = i[o:o + n]
-    o += n
-    rng_state = i[o:o + n]
-    o += n
-    need = i[o:o + n]
-    o += n
-    n_need = i[o:o + 1]
-    o += 1
-    msg_sender_len = i[o:o + 2 * mm].reshape((mm, 2))
-    o += 2 * mm
-    msg_start = i[o:o + mm]
-    o += mm
-    receiver = i[o:o + mm]
-    o += mm
-    in_sender_id = i[o:o + mm]
-    o += mm
-    content_row = i[o:o + mm]
-    o += mm
-    c_heard_ids = i[o:o + k * mm].reshape((mm, k))
-    o += k * mm
-    heard_ids_out = i[o:o + k * n].reshape((n, k))
-    o += k * n
-    state = i[o:o + n]
-    o += n
+    header, o = _take(i, o, N_HEADER)
+    robot_ids, o = _take(i, o, n)
+    target, o = _take(i, o, n)
+    lost_count, o = _take(i, o, n)
+    visit_ticks, o = _take2(i, o, n, 2)
+    turn_ticks, o = _take(i, o, n)
+    straight_ticks, o = _take(i, o, n)
+    heard_ids, o = _take2(i, o, n, k)
+    partner_ids, o = _take2(i, o, n, e)
+    partner_until, o = _take2(i, o, n, e)
+    settings, o = _take(i, o, kernels.N_SETTINGS)
+    math_fns, o = _take(i, o, 3)
+    rng_fn, o = _take(i, o, n)
+    rng_state, o = _take(i, o, n)
+    need, o = _take(i, o, n)
+    n_need, o = _take(i, o, 1)
+    msg_sender_len, o = _take2(i, o, mm, 2)
+    msg_start, o = _take(i, o, mm)
+    receiver, o = _take(i, o, mm)
+    in_sender_id, o = _take(i, o, mm)
+    content_row, o = _take(i, o, mm)
+    c_heard_ids, o = _take2(i, o, mm, k)
+    heard_ids_out, o = _take2(i, o, n, k)
+    state, o = _take(i, o, n)
     i_extent = o
 
     o = 0
-    known = b[o:o + 2 * n].reshape((n, 2))
-    o += 2 * n
-    searching = b[o:o + n]
-    o += n
-    adopted = b[o:o + 2 * n].reshape((n, 2))
-    o += 2 * n
-    c_known = b[o:o + 2 * mm].reshape((mm, 2))
-    o += 2 * mm
-    msg_bad = b[o:o + mm]
-    o += mm
-    known_out = b[o:o + 2 * n].reshape((n, 2))
-    o += 2 * n
-    on_path = b[o:o + n]
-    o += n
+    known, o = _take2(b, o, n, 2)
+    searching, o = _take(b, o, n)
+    adopted, o = _take2(b, o, n, 2)
+    c_known, o = _take2(b, o, mm, 2)
+    msg_bad, o = _take(b, o, mm)
+    known_out, o = _take2(b, o, n, 2)
+    on_path, o = _take(b, o, n)
     b_extent = o
     return (
         (encoder_steps, ir, ground, pose, frame_pose, new_pose, goal_xy, goal_p_m, goal_cov, search_left_m,
