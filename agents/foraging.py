@@ -16,11 +16,12 @@ robot last left the area, in metres.
 
 Everything is over a batch of robots, so one agent process runs a batch of one and the batch
 engine the whole swarm (an agent process steps its batch of one through ``agents/agent_tick.py``:
-the same kernel, its state packed, one compiled call per tick, the payloads coded in it). The layers run in compiled kernels (``agents/kernels.py``), the same for
-both, in one call per tick; they evaluate the equations of :mod:`.social_odometry` (whose numpy
-functions remain the readable reference, and the tests hold the kernels to them). Each robot owns
-its generator, derived from the run seed and its id; the kernel draws a robot's random walk from
-it, the numbers numpy would give.
+the same kernel, its state packed, one compiled call per tick, the payloads coded in it). The
+layers run in compiled kernels (``agents/kernels.py``), the same for both, in one call per tick;
+they evaluate the equations of :mod:`.social_odometry` (whose numpy functions remain the readable
+reference, and the tests hold the kernels to them). Each robot owns its generator, derived from
+the run seed and its id; the kernel draws a robot's random walk from it, the numbers numpy would
+give.
 
 Modelling choices the papers leave open are named in :class:`AgentConfig`.
 """

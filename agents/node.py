@@ -90,27 +90,24 @@ class AgentNode:
 
     def _on_sense(self, sample: zenoh.Sample) -> None:
         data = sample.payload.to_bytes()
-        if self._act_wire is not None:  # bytes to bytes in one call, when the brain can
-            act = self._act_wire(data, self.errors)
-            if act is not None:
-                self.last_sense_at = time.monotonic()
-                self._act_pub.put(act)
-                self.ticks += 1
+        # bytes to bytes in one call, when the brain can; None: decode and step it here
+        act = self._act_wire(data, self.errors) if self._act_wire is not None else None
+        if act is None:
+            try:
+                sense = decode(data, self.brain.sense_type)
+                if sense.robot_id != self.robot_id:
+                    raise ProtocolError("robot_id", f"{sense.robot_id} sent on the key of robot {self.robot_id}")
+            except ProtocolError as exc:
+                self.errors.record(str(sample.key_expr), "sense", exc)
                 return
-        try:
-            sense = decode(data, self.brain.sense_type)
-            if sense.robot_id != self.robot_id:
-                raise ProtocolError("robot_id", f"{sense.robot_id} sent on the key of robot {self.robot_id}")
-        except ProtocolError as exc:
-            self.errors.record(str(sample.key_expr), "sense", exc)
-            return
+            if getattr(sense, "final", False):
+                self.last_sense_at = time.monotonic()
+                self.end_reason = "final sense"
+                self.done.set()
+                return
+            act = encode(self.brain.act(sense, self.errors))
         self.last_sense_at = time.monotonic()
-        if getattr(sense, "final", False):
-            self.end_reason = "final sense"
-            self.done.set()
-            return
-        act = self.brain.act(sense, self.errors)
-        self._act_pub.put(encode(act))
+        self._act_pub.put(act)
         self.ticks += 1
 
     def _on_end(self, sample: zenoh.Sample) -> None:
