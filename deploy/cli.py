@@ -99,6 +99,14 @@ def _run_name(p: argparse.ArgumentParser, required: bool = False) -> None:
                    help="run name: the key prefix swarmloc/<run>/ that keeps runs apart")
 
 
+def _compile_kernels() -> None:
+    """Compile the kernels if this machine's cache lacks them (deploy/warm.py), saying so on
+    stderr; a few milliseconds when the cache is warm."""
+    from swarmloc.deploy.warm import ensure_compiled
+
+    ensure_compiled(lambda line: print(f"swarmloc: {line}", file=sys.stderr, flush=True))
+
+
 def _install_stop() -> threading.Event:
     stop = threading.Event()
 
@@ -147,6 +155,7 @@ def main_world(args) -> int:
     scenario = load_from_args(args, any_family=True)
     keys = Keys(args.run)
     stop = _install_stop()
+    _compile_kernels()  # before the join queryable: the join timeout never races a compiler
     out = Path(args.out) if args.out else None
     if out:
         out.mkdir(parents=True, exist_ok=True)
@@ -198,6 +207,7 @@ def main_agent(args) -> int:
     keys = Keys(args.run)
     if args.nice:
         os.nice(args.nice)
+    _compile_kernels()  # before joining: a joined agent is ready to answer its first Sense
     with open_session(config_from_args(args)) as session:
         return run_agent(session, keys, args.robot, stop, join_timeout_s=args.join_timeout_s,
                          world_timeout_s=args.world_timeout_s, world_grace_s=args.world_grace_s,
@@ -209,6 +219,7 @@ def main_batch(args) -> int:
     from swarmloc.deploy.run import print_metrics
 
     scenario = load_from_args(args)
+    _compile_kernels()
     t0 = time.perf_counter()
     result = run_batch(scenario)
     summary = {"scenario": scenario.name, "strategy": scenario.agent.strategy,
@@ -254,7 +265,7 @@ def main_mrclam(args) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from swarmloc.deploy import experiment, report
+    from swarmloc.deploy import experiment, report, warm
 
     parser = argparse.ArgumentParser(prog="swarmloc", description=__doc__.splitlines()[0])
     parser.add_argument("-v", "--verbose", action="store_true", help="log more")
@@ -315,6 +326,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     experiment.add_parser(sub)
     report.add_parser(sub)
+    warm.add_parser(sub)
 
     p = sub.add_parser("laser-experiment",
                        help="run the laser experiments of seeds 002-003 and write their report")

@@ -624,6 +624,12 @@ def run_experiment(
             handle.write(_csv_line(spec.columns()))
         if not todo:
             return 0
+        if spec.family == "epuck":
+            # Compile once here, not in every worker at once (deploy/warm.py).
+            from swarmloc.deploy.warm import ensure_compiled
+
+            ensure_compiled(lambda line: print(f"swarmloc: {line}", file=sys.stderr, flush=True)
+                            if mode else None)
         bar = _Progress(mode, spec.name, len(todo), sum(j.cost for j in todo),
                         min(workers, len(todo)), len(done))
         try:

@@ -149,6 +149,11 @@ def run_local(scenario: AnyScenario, *, run_name: str | None, out_root: Path, re
         raise SystemExit(128 + signum)
 
     signal.signal(signal.SIGTERM, terminated)
+    # Compile the kernels in this one process before any piece starts (deploy/warm.py): left
+    # to the pieces, a cold machine's world and agents compiled them all at once.
+    from swarmloc.deploy.warm import ensure_compiled
+
+    ensure_compiled(say)
     with supervised() as sup:
         swarm = start_swarm(sup, scenario_file, run=run, robots=scenario.robots, out=out,
                             log_dir=log_dir, realtime=realtime, join_timeout_s=join_timeout_s,
