@@ -153,7 +153,8 @@ def run_local(scenario: AnyScenario, *, run_name: str | None, out_root: Path, re
     # to the pieces, a cold machine's world and agents compiled them all at once.
     from swarmloc.deploy.warm import ensure_compiled
 
-    ensure_compiled(say)
+    # Said even with --quiet (which only drops the progress bar): it explains a minute's wait.
+    ensure_compiled(lambda line: print(line, file=sys.stderr, flush=True))
     with supervised() as sup:
         swarm = start_swarm(sup, scenario_file, run=run, robots=scenario.robots, out=out,
                             log_dir=log_dir, realtime=realtime, join_timeout_s=join_timeout_s,

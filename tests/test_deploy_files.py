@@ -28,11 +28,15 @@ def test_there_are_units_for_router_world_and_agents():
     assert names == {"swarmloc-router.service", "swarmloc-world.service", "swarmloc-agent@.service"}
 
 
-@pytest.mark.parametrize("unit", UNITS, ids=lambda u: u.name)
-def test_unit_command_parses(unit):
+def _service(unit: Path):
     parser = configparser.ConfigParser(interpolation=None, strict=False)
     parser.read_string(unit.read_text())
-    command = parser["Service"]["ExecStart"]
+    return parser["Service"]
+
+
+@pytest.mark.parametrize("unit", UNITS, ids=lambda u: u.name)
+def test_unit_command_parses(unit):
+    command = _service(unit)["ExecStart"]
     env = _env()
     for key, value in env.items():
         command = command.replace("${" + key + "}", value)
@@ -44,3 +48,11 @@ def test_unit_command_parses(unit):
     assert args.command in {"router", "world", "agent"}
     if args.command == "agent":
         assert args.robot == 7
+
+
+@pytest.mark.parametrize("unit", [u for u in UNITS if "router" not in u.name], ids=lambda u: u.name)
+def test_world_and_agent_units_warm_the_kernels_before_they_start(unit):
+    service = _service(unit)
+    pre = shlex.split(service["ExecStartPre"].replace("${SWARMLOC}", _env()["SWARMLOC"]))
+    assert build_parser().parse_args(pre[1:]).command == "warm"
+    assert float(service["TimeoutStartSec"]) >= 120, "a cold compile takes about a minute"

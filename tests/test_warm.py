@@ -1,0 +1,151 @@
+"""The kernels compile once per machine, before any piece waits on another (deploy/warm.py).
+
+A newcomer's first ``swarmloc run`` used to fail: on a cold numba cache the world and ten agents
+compiled the same kernels at once, for longer than the join timeout. These tests start from an
+empty cache folder, as a new machine has, and run the real command:
+
+- the default ``swarmloc run`` (router, world, 10 agents) from an empty cache completes, with the
+  metrics of a warm run of the same seed; one process compiled, no piece did; the warm run added
+  nothing to the cache (what :func:`exercise` compiles covers what a run calls);
+- ``pip install .`` (not editable) into a fresh virtual environment, three ``swarmloc warm`` at
+  once on an empty cache (one compiles, none twice), then ``swarmloc run --duration-s 60`` from
+  another working directory, with the cache in the user's cache folder, none beside the installed
+  sources.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from swarmloc.deploy.warm import COMPILING_MESSAGE, STAMP_NAME, fingerprint, is_warm, kernel_sources
+from swarmloc.kernel_cache import default_dir
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def _swarmloc(args: list[str], *, env: dict, cwd: Path, timeout_s: float,
+              python: str = sys.executable) -> subprocess.CompletedProcess:
+    """Run ``swarmloc ARGS`` to its end; on a timeout, SIGTERM (swarmloc run then stops every
+    piece it started), then SIGKILL."""
+    proc = subprocess.Popen([python, "-m", "swarmloc", *args], cwd=cwd, env=env, text=True,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, stdin=subprocess.DEVNULL,
+                            start_new_session=True)
+    try:
+        stdout, stderr = proc.communicate(timeout=timeout_s)
+    except subprocess.TimeoutExpired:
+        proc.send_signal(signal.SIGTERM)
+        try:
+            proc.communicate(timeout=20)
+        finally:
+            if proc.poll() is None:
+                os.killpg(proc.pid, signal.SIGKILL)
+                proc.wait()
+        raise
+    return subprocess.CompletedProcess(proc.args, proc.returncode, stdout, stderr)
+
+
+def _cache_files(cache: Path) -> dict[str, tuple[int, int]]:
+    return {str(p.relative_to(cache)): (p.stat().st_size, p.stat().st_mtime_ns)
+            for p in cache.rglob("*") if p.is_file() and not p.name.endswith(".lock")}
+
+
+def test_the_stamp_names_every_kernel_source_and_a_changed_source_makes_it_stale(tmp_path, monkeypatch):
+    names = {p.name for p in kernel_sources()}
+    assert {"kernels.py", "agent_tick.py", "epuck_wire.py", "social_codec.py", "batch.py"} <= names
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    assert not is_warm(tmp_path)
+    (tmp_path / STAMP_NAME).write_text(fingerprint())
+    assert is_warm(tmp_path)
+    stale = json.loads(fingerprint())
+    stale["sources"][0][1] -= 1  # numba would see another modification time and recompile
+    (tmp_path / STAMP_NAME).write_text(json.dumps(stale, indent=1))
+    assert not is_warm(tmp_path)
+
+
+def test_the_cache_is_per_user_and_falls_back_when_home_is_not_writable(tmp_path, monkeypatch):
+    monkeypatch.delenv("XDG_CACHE_HOME", raising=False)
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    assert default_dir() == tmp_path / "home" / ".cache" / "swarmloc" / "numba"
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    assert default_dir() == tmp_path / "xdg" / "swarmloc" / "numba"
+    blocker = tmp_path / "file"
+    blocker.write_text("")  # a cache home that is a file cannot hold folders
+    monkeypatch.setenv("XDG_CACHE_HOME", str(blocker))
+    fallback = default_dir()
+    assert fallback.parts[-2:] == (f"swarmloc-{os.getuid()}", "numba") and blocker not in fallback.parents
+
+
+@pytest.mark.integration
+def test_default_run_from_an_empty_kernel_cache_completes_with_the_warm_runs_metrics(tmp_path):
+    cache = tmp_path / "numba"
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(cache)}
+    out = tmp_path / "runs"
+    cold = _swarmloc(["run", "--out", str(out), "--run", "cold"], env=env, cwd=tmp_path, timeout_s=420)
+    assert cold.returncode == 0, cold.stderr[-3000:]
+    assert cold.stderr.count(COMPILING_MESSAGE) == 1, cold.stderr
+    for log in (out / "cold" / "logs").iterdir():  # the launcher compiled; no piece had to
+        text = log.read_text()
+        assert COMPILING_MESSAGE not in text and "compiling kernels" not in text, log
+    assert is_warm(cache)
+    before = _cache_files(cache)
+    assert sum(name.endswith(".nbi") for name in before) > 10
+
+    warm = _swarmloc(["run", "--out", str(out), "--run", "warm"], env=env, cwd=tmp_path, timeout_s=300)
+    assert warm.returncode == 0, warm.stderr[-3000:]
+    assert "compiling kernels" not in warm.stderr
+    assert _cache_files(cache) == before, "a warm run compiled something the warm-up did not"
+    cold_result = json.loads((out / "cold" / "results.json").read_text())
+    warm_result = json.loads((out / "warm" / "results.json").read_text())
+    assert cold_result["seed"] == warm_result["seed"] == 1 and cold_result["robots"] == 10
+    assert cold_result["metrics"] == warm_result["metrics"]
+    assert cold_result["metrics"]["round_trips_total"] > 0
+
+
+@pytest.mark.integration
+def test_a_non_editable_install_warms_once_and_runs_from_another_folder(tmp_path):
+    venv = tmp_path / "venv"
+    subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True, timeout=120)
+    python = str(venv / "bin" / "python")
+    pip = subprocess.run([python, "-m", "pip", "install", "--quiet", "--disable-pip-version-check",
+                          str(REPO)], capture_output=True, text=True, timeout=900, check=False)
+    assert pip.returncode == 0, pip.stderr[-3000:]
+    site = subprocess.run([python, "-c", "import swarmloc, pathlib; print(pathlib.Path(swarmloc.__file__).parent)"],
+                          capture_output=True, text=True, check=True, cwd=tmp_path, timeout=60).stdout.strip()
+    assert str(venv) in site and str(REPO) not in site, "swarmloc imported from the checkout, not the install"
+
+    home = tmp_path / "home"
+    home.mkdir()
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    env = {k: v for k, v in os.environ.items() if k not in ("NUMBA_CACHE_DIR", "XDG_CACHE_HOME", "PYTHONPATH")}
+    env["HOME"] = str(home)
+    # Three pieces starting at once on a cold machine: one compiles, the others wait for it.
+    procs = [subprocess.Popen([python, "-m", "swarmloc", "warm"], cwd=elsewhere, env=env, text=True,
+                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
+             for _ in range(3)]
+    try:
+        outputs = [p.communicate(timeout=400)[0] for p in procs]
+    finally:
+        for p in procs:
+            if p.poll() is None:
+                p.kill()
+                p.wait()
+    assert [p.returncode for p in procs] == [0, 0, 0], outputs
+    assert sum(COMPILING_MESSAGE in o for o in outputs) == 1, outputs
+    cache = home / ".cache" / "swarmloc" / "numba"
+    assert (cache / STAMP_NAME).exists(), outputs
+    assert not list(Path(site).rglob("*.nbi")), "kernels cached beside the installed sources"
+
+    run = _swarmloc(["run", "--duration-s", "60", "--run", "installed"], env=env, cwd=elsewhere,
+                    timeout_s=300, python=python)
+    assert run.returncode == 0, run.stderr[-3000:]
+    assert "compiling kernels" not in run.stderr and "round trips" in run.stdout
+    result = json.loads((elsewhere / "runs" / "installed" / "results.json").read_text())
+    assert result["transport"]["ticks"] == 600 and result["robots"] == 10
