@@ -34,6 +34,7 @@ from dataclasses import dataclass
 import msgpack
 import numpy as np
 
+from swarmloc import numerics
 from swarmloc.agents import kernels
 from swarmloc.agents.social_odometry import STRATEGIES
 from swarmloc.protocol.epuck import (  # noqa: F401 -- on_path is part of this module's API
@@ -380,7 +381,7 @@ class ForagingBrain:
             (kernels.S_KNOWS_BOTH, KNOWS_BOTH), (kernels.S_MOTORS, 1),
         ):
             self._settings[slot] = int(value)
-        self._math = kernels.numpy_math()  # numpy's exp and arctan2, bit for bit
+        self._math = numerics.numpy_math()  # numpy's exp and arctan2, bit for bit
 
     # -- layers ------------------------------------------------------------------------------
     # The work is done by the compiled kernels of agents/kernels.py, on the state arrays above,
@@ -416,11 +417,11 @@ class ForagingBrain:
     _motors = None
 
     def _rng_addresses(self) -> tuple[np.ndarray, np.ndarray]:
-        """Where the kernels draw each robot's numbers from (agents/kernels.py:
+        """Where the kernels draw each robot's numbers from (swarmloc/numerics.py:
         generator_address): the addresses of ``self.rngs``, found again if it was replaced."""
         rngs, fn, state = self._rng_address
         if rngs is not self.rngs:
-            addresses = [kernels.generator_address(g) for g in self.rngs]
+            addresses = [numerics.generator_address(g) for g in self.rngs]
             fn = np.array([a[0] for a in addresses], np.int64)
             state = np.array([a[1] for a in addresses], np.int64)
             self._rng_address = (self.rngs, fn, state)

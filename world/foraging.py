@@ -29,6 +29,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from swarmloc import numerics
 from swarmloc.protocol.epuck import GROUND_SENSOR_OFFSETS_M, IR_SENSOR_ANGLES_RAD, EpuckBody
 from swarmloc.protocol.messages import MAX_RAB_PAYLOAD_BYTES, MAX_RECEIVED
 from swarmloc.world import kernels
@@ -238,7 +239,7 @@ class ForagingWorld:
         self._crossed_f = np.empty((2, k_max))
         self._step_u = np.empty(2 * k_max + 2 * n)  # room for step's uniforms
         self._rng_address: tuple = (None, 0, 0)  # (generator, next_double, state)
-        self._math = kernels.numpy_math()  # numpy's arctan2, bit for bit
+        self._math = numerics.numpy_math()  # numpy's arctan2, bit for bit
 
     def _pair_buffers(self, capacity: int) -> None:
         """Room for ``capacity`` neighbour pairs (world/kernels.py: neighbour_pairs_into) and for
@@ -259,10 +260,10 @@ class ForagingWorld:
         return self.tick >= self._n_ticks
 
     def _rng_addresses(self) -> tuple[int, int]:
-        """Where the kernels draw from ``self.rng`` (world/kernels.py: generator_address)."""
+        """Where the kernels draw from ``self.rng`` (swarmloc/numerics.py: generator_address)."""
         rng, fn, state = self._rng_address
         if rng is not self.rng:
-            fn, state = kernels.generator_address(self.rng)
+            fn, state = numerics.generator_address(self.rng)
             self._rng_address = (self.rng, fn, state)
         return fn, state
 
