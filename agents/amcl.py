@@ -89,8 +89,8 @@ from swarmloc.agents.localizer import (
     RadioMessage,
     Sighting,
 )
-from swarmloc.world.laser import unicycle_model, wrap_angle
-from swarmloc.world.maps import SegmentMap, build_map, distance_to_walls, free_space_sample
+from swarmloc.world.laser.laser import unicycle_model, wrap_angle
+from swarmloc.world.laser.maps import SegmentMap, build_map, distance_to_walls, free_space_sample
 
 TWO_PI = 2.0 * math.pi
 

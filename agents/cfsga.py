@@ -4,7 +4,7 @@ Seed ``003_5278cbbbf8cc61de.txt`` (Bori, Gasparri, Panzieri), §III-B, §IV and 
 runs one population of ``m`` pose hypotheses ``p = (x_m, y_m, theta_rad)`` (§IV-A). One step:
 
 1. **Kinematic update** (§IV-A): every individual is moved by the odometry ``(delta_s, delta_phi)``
-   with the unicycle of eq. 3 of seed 002 (:func:`swarmloc.world.laser.unicycle_model`), each
+   with the unicycle of eq. 3 of seed 002 (:func:`swarmloc.world.laser.laser.unicycle_model`), each
    with its own draw of the odometry noise the robot declares
    (``LocalizerSetup.speed_std_mps``/``turn_rate_std_rad_s`` times ``dt_s``; option
    ``motion_diffusion``, on by default) while the odometry reports a move; a robot whose
@@ -126,8 +126,8 @@ from swarmloc.agents.localizer import (
     RadioMessage,
     Sighting,
 )
-from swarmloc.world.laser import cast_rays, unicycle_model, wrap_angle
-from swarmloc.world.maps import SegmentMap, build_map, free_space_sample
+from swarmloc.world.laser.laser import cast_rays, unicycle_model, wrap_angle
+from swarmloc.world.laser.maps import SegmentMap, build_map, free_space_sample
 
 RawFitness = Callable[[np.ndarray], np.ndarray]
 PoseSampler = Callable[[int, np.random.Generator], np.ndarray]

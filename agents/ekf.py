@@ -54,7 +54,7 @@ from swarmloc.agents.mrclam_localizers import (
     spectral_norm_xy,
     wrap_angle,
 )
-from swarmloc.world.replay import LandmarkObservation
+from swarmloc.world.replay.replay import LandmarkObservation
 
 #: chi-square quantile, 2 degrees of freedom, 99.9 %.
 CHI2_2DOF_999 = 13.815510557964274

@@ -18,7 +18,7 @@ runs are bit-identical to it (``benchmarks/fingerprint.py``):
   every array it returns, which for a swarm of 100 costs as much as the work: so the brain
   makes one call per tick, with preallocated outputs and its constants packed in two arrays.
 
-Exactness, as in ``world/kernels.py``:
+Exactness, as in ``world/epuck/kernels.py``:
 
 - each robot's random walk draws from its own ``numpy.random.Generator``, through the
   ``next_double`` function of its bit generator (:func:`~swarmloc.numerics.generator_address`): the very function

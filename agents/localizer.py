@@ -67,8 +67,8 @@ class LaserObservation:
 @dataclass(frozen=True)
 class LocalizerSetup:
     """What every localizer is built from: the robot's id, the map name (see
-    ``swarmloc.world.maps``), its laser, and the parameters of its motion and relative
-    observations (``swarmloc.world.laser``). Algorithm parameters come separately."""
+    ``swarmloc.world.laser.maps``), its laser, and the parameters of its motion and relative
+    observations (``swarmloc.world.laser.laser``). Algorithm parameters come separately."""
 
     robot_id: int
     map_name: str

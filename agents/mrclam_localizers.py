@@ -1,7 +1,7 @@
 """Localizers for landmark range-and-bearing robots (the MRCLAM replay), and their contract.
 
 This mirrors the laser family's contract (``agents/localizer.py``) for the observations of
-:class:`swarmloc.world.replay.LandmarkObservation`: one localizer object is one robot's brain, a
+:class:`swarmloc.world.replay.replay.LandmarkObservation`: one localizer object is one robot's brain, a
 pure model with its own ``numpy.random.Generator``, that the replay world feeds in-process or a
 world-server shell feeds over Zenoh:
 
@@ -65,7 +65,7 @@ import msgpack
 import numpy as np
 
 from swarmloc.agents.social_odometry import sgikf_update
-from swarmloc.world.replay import MAX_PAYLOAD_BYTES, LandmarkObservation, Message
+from swarmloc.world.replay.replay import MAX_PAYLOAD_BYTES, LandmarkObservation, Message
 
 TWO_PI = 2.0 * math.pi
 

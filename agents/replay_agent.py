@@ -39,7 +39,7 @@ class ReplayAgent:
         return cls(replay_localizer(dataset, world, config, rid), welcome.robot_id, rid)
 
     def act(self, sense: ReplaySense, errors: ErrorCounter) -> EstimateAct:
-        from swarmloc.world.replay import LandmarkObservation, Message
+        from swarmloc.world.replay.replay import LandmarkObservation, Message
 
         def columns(items):
             return (np.array([m.landmark_id for m in items], dtype=np.int64),

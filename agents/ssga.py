@@ -14,7 +14,7 @@ Seed ``/work/shared/seeds/002_fe2ac635ba0eab3e.txt`` (Gasparri, Panzieri, Pascuc
   fitness to ``mutation_std_min`` at the highest fitness the model can give.
 - **Fitness eq. 1** (:meth:`FitnessModel.scan_fitness`): mean over the L beams of a Gaussian of
   the difference between the measured range and the range expected at the hypothesis (eq. 4,
-  :func:`swarmloc.world.laser.cast_rays`).
+  :func:`swarmloc.world.laser.laser.cast_rays`).
 - **Collaborative fitness eq. 2** (:meth:`FitnessModel.team_fitness`): for every teammate ``s``
   this robot both sees (:class:`~swarmloc.agents.localizer.Sighting`: distance, bearing, relative
   heading) and hears (its scan, sent by :meth:`SSGALocalizer.outgoing`), the teammate's pose is
@@ -22,7 +22,7 @@ Seed ``/work/shared/seeds/002_fe2ac635ba0eab3e.txt`` (Gasparri, Panzieri, Pascuc
   scan at that replicated pose is added. A teammate heard but not seen cannot enter eq. 2
   (its pose relative to the hypothesis is unknown): eq. 1 only.
 - **Kinematic update, eq. 3**: every individual moves with the robot's odometry through
-  :func:`swarmloc.world.laser.unicycle_model`, plus Gaussian noise of the motion model's standard
+  :func:`swarmloc.world.laser.laser.unicycle_model`, plus Gaussian noise of the motion model's standard
   deviations (table 2: sigma_s), which keeps the population diverse and covers the true motion's
   noise; with ``elite_exact_motion`` (table 3's spec sets it) the last step's best individual
   moves without that noise (readings below).
@@ -107,8 +107,8 @@ from swarmloc.agents.localizer import (
     LocalizerSetup,
     Sighting,
 )
-from swarmloc.world.laser import cast_rays, unicycle_model, wrap_angle
-from swarmloc.world.maps import SegmentMap, build_map, free_space_sample
+from swarmloc.world.laser.laser import cast_rays, unicycle_model, wrap_angle
+from swarmloc.world.laser.maps import SegmentMap, build_map, free_space_sample
 
 #: Networks a population can be laid on (002 §2.2).
 NETWORKS = ("watts_strogatz", "barabasi_albert")

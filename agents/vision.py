@@ -21,7 +21,7 @@ pan angle for the body frame.
 Pipeline (OpenCV): BGR -> HSV, ``cv2.inRange`` per class, a morphological opening (removes
 speckle) and closing (fills holes) with a 3 x 3 cross, ``cv2.connectedComponentsWithStats``,
 blobs below ``min_area_px`` rejected. The class table :data:`COLOUR_CLASSES` must agree with the
-colours and sizes that ``swarmloc.world.camera`` renders; the tests check that it does.
+colours and sizes that ``swarmloc.world.vision.camera`` renders; the tests check that it does.
 """
 
 from __future__ import annotations

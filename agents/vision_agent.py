@@ -98,8 +98,8 @@ from swarmloc.agents.potential_field import (
     potential_field,
 )
 from swarmloc.agents.vision import COLOUR_CLASSES, detect_blobs
-from swarmloc.world.camera import OBJECT_KINDS, CameraParams
-from swarmloc.world.vision_world import VisionCommand, VisionObservation
+from swarmloc.world.vision.camera import OBJECT_KINDS, CameraParams
+from swarmloc.world.vision.world import VisionCommand, VisionObservation
 
 #: Version of the shared-detections payload.
 SHARE_VERSION = 1

@@ -105,7 +105,7 @@ class VisionAgent:
     # -- per frame ------------------------------------------------------------------------------
 
     def act(self, sense: VisionSense, errors: ErrorCounter) -> VisionAct:
-        from swarmloc.world.vision_world import VisionObservation
+        from swarmloc.world.vision.world import VisionObservation
 
         obs = VisionObservation(
             robot_id=sense.robot_id, tick=sense.tick, time_s=sense.time_s, image=sense.image,

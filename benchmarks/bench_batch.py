@@ -58,7 +58,7 @@ def _scenario(n: int, ticks: int, strategy: str):
 
 def per_tick(args) -> None:
     from swarmloc.deploy.batch import CompiledTicks, swarm_brain
-    from swarmloc.world.foraging import ForagingWorld
+    from swarmloc.world.epuck.foraging import ForagingWorld
 
     print(f"{'robots':>7} {'ms/tick':>9} {'robot-steps/s':>14} {'x real time':>12}   (CPU time, one core)")
     for n in args.robots:

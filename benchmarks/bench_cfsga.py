@@ -31,8 +31,8 @@ from swarmloc.agents.localizer import (
     RadioMessage,
     Sighting,
 )
-from swarmloc.world.laser import LaserParams, MotionNoise, RelativeNoise, scan
-from swarmloc.world.maps import build_map
+from swarmloc.world.laser.laser import LaserParams, MotionNoise, RelativeNoise, scan
+from swarmloc.world.laser.maps import build_map
 
 POPULATIONS = (100, 300, 1000)
 N_OBSERVATIONS = 50

@@ -40,7 +40,7 @@ from swarmloc.agents.localizer import (
 )
 from swarmloc.agents.simple_ga import SimpleGALocalizer
 from swarmloc.agents.ssga import SSGALocalizer, encode_scan_payload
-from swarmloc.world.laser import (
+from swarmloc.world.laser.laser import (
     LaserParams,
     MotionNoise,
     RelativeNoise,
@@ -49,7 +49,7 @@ from swarmloc.world.laser import (
     unicycle_step,
     wrap_angle,
 )
-from swarmloc.world.maps import build_map
+from swarmloc.world.laser.maps import build_map
 
 MAP_NAME = "symmetric_rooms"
 POPULATIONS = (50, 100, 300)

@@ -39,7 +39,7 @@ from swarmloc.deploy.vision_batch import (
     detection_table,
     frame_costs,
 )
-from swarmloc.world.vision_world import RobotStart, VisionWorld, VisionWorldConfig
+from swarmloc.world.vision.world import RobotStart, VisionWorld, VisionWorldConfig
 
 
 def brain_step_cost(n_ticks: int) -> float:

@@ -7,7 +7,7 @@ float32 they cross the wire with), so a seeded run gives the same trajectories a
 and over processes.
 
 A tick is ``world.observe()``, ``brain.step(...)``, then ``world.step(...)``, each one call of a
-compiled kernel (``world/kernels.py: observe_tick, step_tick``, ``agents/kernels.py:
+compiled kernel (``world/epuck/kernels.py: observe_tick, step_tick``, ``agents/kernels.py:
 brain_tick``). :func:`run_ticks` makes the same three calls from one compiled function
 (:func:`batch_tick`: a world's step, the next observation and the brains' step), without the
 Python objects in between (Observation, Inbox, BrainOutput): at 100 robots that glue cost as much
@@ -28,8 +28,8 @@ from swarmloc.agents import kernels as agent_kernels
 from swarmloc.agents.foraging import BrainOutput, ForagingBrain, Inbox, agent_rng
 from swarmloc.agents.global_imitation import central_rng, imitate_brain
 from swarmloc.deploy.scenario import Scenario
-from swarmloc.world import kernels as world_kernels
-from swarmloc.world.foraging import ForagingWorld, Observation
+from swarmloc.world.epuck import kernels as world_kernels
+from swarmloc.world.epuck.foraging import ForagingWorld, Observation
 
 
 def inbox_from(observation: Observation, sent: BrainOutput | None, robot_ids: np.ndarray) -> Inbox:
@@ -112,12 +112,12 @@ TICK_DONE, TICK_CROWD, TICK_NO_ROOM = 0, 1, 2
 @njit(cache=True, error_model="numpy")
 def batch_tick(
     step_first,
-    # world/kernels.py: step_tick's arguments (unused unless step_first)
+    # world/epuck/kernels.py: step_tick's arguments (unused unless step_first)
     s_pose, s_cmd, s_alive, s_sending, s_on_path, s_params, s_discs, s_rng_fn, s_rng_state, s_math_fns,
     s_pair_ij, s_pair_f, s_snapshot, s_counts, s_pose_out, s_encoder_out, s_crossed_ij, s_crossed_f, s_tick,
     s_first_visit_tick, s_round_trips, s_stage, s_stage_codes, s_trig, s_trig_pose, s_per_robot, s_work_i,
     s_work_f, s_step_u,
-    # world/kernels.py: observe_tick's arguments
+    # world/epuck/kernels.py: observe_tick's arguments
     o_pose, o_params, o_cos_a, o_sin_a, o_offsets, o_discs, o_reflectance, o_rng_fn, o_rng_state, o_ir,
     o_ground, o_pair_ij, o_pair_f, o_pair_scratch, o_snapshot, o_counts, o_crossed_ij, o_crossed_f, o_alive,
     o_sender, o_receiver, o_range_m, o_bearing_rad, o_trig, o_trig_pose, o_noise_u,

@@ -3,7 +3,7 @@ stepped in one process with no transport (seeds ``002_fe2ac635ba0eab3e.txt`` and
 ``003_5278cbbbf8cc61de.txt`` in ``/work/shared/seeds/``).
 
 A **laser scenario** (TOML; shipped ones in ``deploy/scenarios/laser/``) has a name, a
-description, a ``[world]`` table (:class:`~swarmloc.world.laser_world.LaserWorldConfig`: map,
+description, a ``[world]`` table (:class:`~swarmloc.world.laser.world.LaserWorldConfig`: map,
 robots, steps, sensors, radio, driver, paths, kidnaps), an ``[algorithm]`` table
 (:class:`AlgorithmConfig`: which localizer, collaborative or not, its population, its own
 parameters) and a ``[metrics]`` table (:class:`MetricsConfig`: the thresholds of the summary).
@@ -71,9 +71,9 @@ import numpy as np
 from swarmloc.agents.foraging import agent_rng
 from swarmloc.agents.localizer import Localizer, LocalizerSetup
 from swarmloc.config import ConfigError, apply_overrides, from_dict, load_toml, to_dict
-from swarmloc.world.laser import wrap_angle
-from swarmloc.world.laser_world import WORLD_STREAM, LaserWorld, LaserWorldConfig
-from swarmloc.world.maps import MAPS, SegmentMap
+from swarmloc.world.laser.laser import wrap_angle
+from swarmloc.world.laser.world import WORLD_STREAM, LaserWorld, LaserWorldConfig
+from swarmloc.world.laser.maps import MAPS, SegmentMap
 
 # -- algorithms -------------------------------------------------------------------------------
 

@@ -216,7 +216,7 @@ def curve_tail_indexes(runs_m: np.ndarray, fraction: float = CURVE_TAIL_FRACTION
 
 def _table3(rows: list[dict], out: Path, reasons: dict) -> Section:
     from swarmloc.deploy.laser_batch import map_rotations
-    from swarmloc.world.maps import build_map
+    from swarmloc.world.laser.maps import build_map
 
     groups: dict[tuple[str, str], list[dict]] = defaultdict(list)
     for r in rows:
@@ -230,7 +230,7 @@ def _table3(rows: list[dict], out: Path, reasons: dict) -> Section:
     tail = max(1, round(CURVE_TAIL_FRACTION * steps))
     window = _final_window(scenarios)
     lines = [
-        (f"Three robots start in three rooms of the floor `{'`, `'.join(maps)}` (world/maps.py) "
+        (f"Three robots start in three rooms of the floor `{'`, `'.join(maps)}` (world/laser/maps.py) "
          f"and walk scripted paths into its corridor "
          f"({', '.join(f'`deploy/scenarios/laser/{s}.toml`' for s in scenarios)}); parameters "
          "of table 2 of 002, population 50 or 100, 100 trials each. PF = the AMCL-style filter "
@@ -730,7 +730,7 @@ def write_report(paths: Sequence[str | Path], out_dir: str | Path, *, command: s
         "(`deploy/experiments/laser-*.toml`, issue 4). Our runs stand next to the papers' "
         "numbers: MR-SSGA (002, `agents/ssga.py`), the simple GA (`agents/simple_ga.py`), CFS-GA "
         "(003, `agents/cfsga.py`) and the AMCL-style particle filter (`agents/amcl.py`), in the "
-        "laser world of `world/laser_world.py` (maps of `world/maps.py`: reconstructions, the "
+        "laser world of `world/laser/world.py` (maps of `world/laser/maps.py`: reconstructions, the "
         "papers' drawings are not in their text). Everything here comes from "
         f"{runs} runs (seeds {seeds[0] if seeds else '–'}..{seeds[-1] if seeds else '–'}); "
         "`results.csv` has one row per run, `curves.csv` the curves drawn."),

@@ -2,7 +2,7 @@
 
 ``run_replay(dataset, config)`` builds one localizer per robot
 (:func:`swarmloc.agents.mrclam_localizers.build_localizer`), drives them with the replay world
-(:class:`swarmloc.world.replay.ReplayWorld`) in lockstep, and returns every estimate with the
+(:class:`swarmloc.world.replay.replay.ReplayWorld`) in lockstep, and returns every estimate with the
 ground truth at the same instants. :func:`score` gives per robot the position RMSE
 ``sqrt(mean |p_est - p_true|^2)`` and heading RMSE ``sqrt(mean wrap(theta_est - theta_true)^2)``
 over the ticks where ground truth exists (Dataset 6's robot 1 has none after +771.9 s; Vicon
@@ -39,8 +39,8 @@ from swarmloc.agents.mrclam_localizers import (
     build_localizer,
     wrap_angle,
 )
-from swarmloc.world.mrclam import MrclamDataset, load_dataset
-from swarmloc.world.replay import DEFAULT_DT_S, ReplayWorld
+from swarmloc.world.replay.mrclam import MrclamDataset, load_dataset
+from swarmloc.world.replay.replay import DEFAULT_DT_S, ReplayWorld
 
 #: Stream id separating the MRCLAM localizers' generators (``[seed, stream, robot_id]``).
 MRCLAM_STREAM = 7

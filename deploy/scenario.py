@@ -16,7 +16,7 @@ from pathlib import Path
 
 from swarmloc.agents.foraging import AgentConfig
 from swarmloc.config import ConfigError, apply_overrides, from_dict, load_toml, to_dict
-from swarmloc.world.foraging import WorldConfig
+from swarmloc.world.epuck.foraging import WorldConfig
 
 DEFAULT_SCENARIO = "ES1"
 
@@ -103,7 +103,7 @@ FAMILY_SCENARIOS: dict[str, str] = {
     "foraging": "swarmloc.deploy.scenario:Scenario",
     "laser": "swarmloc.deploy.laser_batch:LaserScenario",
     "vision": "swarmloc.deploy.vision_batch:VisionScenario",
-    "replay": "swarmloc.world.replay_service:ReplayScenario",
+    "replay": "swarmloc.world.replay.service:ReplayScenario",
 }
 
 #: What the common command-line flags set in each family's scenario.

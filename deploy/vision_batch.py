@@ -19,7 +19,7 @@ run draws its own layout (:func:`layout`, generator ``[seed, 2]``), checked by r
 robot sees what the paper says it sees at the start (a noise-free frame, the agent's own
 detection). Left/right and variant a/b of the paper's figures are drawn at random.
 
-:func:`run_vision` runs one seed: :class:`~swarmloc.world.vision_world.VisionWorld` and one
+:func:`run_vision` runs one seed: :class:`~swarmloc.world.vision.world.VisionWorld` and one
 :class:`~swarmloc.agents.vision_agent.VisionBrain` per robot (generator ``[seed, 1, id]``), in
 lockstep; shared detections travel as the same bytes payloads an agent process would publish on
 ``swarmloc/<run>/team/<team>/blobs/<id>``, through :class:`TeamChannel` (emitted at tick k,
@@ -62,8 +62,8 @@ from swarmloc.agents.vision_agent import (
 )
 from swarmloc.config import ConfigError, apply_overrides, from_dict, load_toml, to_dict
 from swarmloc.protocol.keys import Keys
-from swarmloc.world.camera import OBJECT_KINDS, CameraParams, make_object, project, render
-from swarmloc.world.vision_world import (
+from swarmloc.world.vision.camera import OBJECT_KINDS, CameraParams, make_object, project, render
+from swarmloc.world.vision.world import (
     STOP,
     FieldObject,
     RobotStart,
@@ -73,7 +73,7 @@ from swarmloc.world.vision_world import (
 )
 
 EXPERIMENTS = ("vision-exp1", "vision-exp2", "vision-exp3")
-#: Generator streams ``[seed, stream, ...]``: world 0 (``vision_world``), agents 1, layout 2,
+#: Generator streams ``[seed, stream, ...]``: world 0 (``world/vision/world.py``), agents 1, layout 2,
 #: fault injection 3.
 AGENT_STREAM, LAYOUT_STREAM, FAULT_STREAM = 1, 2, 3
 TEAM = "A"

@@ -43,7 +43,7 @@ from swarmloc.agents.localizer import (
     RadioMessage,
     Sighting,
 )
-from swarmloc.world.laser import (
+from swarmloc.world.laser.laser import (
     LaserParams,
     MotionNoise,
     cast_rays,
@@ -51,7 +51,7 @@ from swarmloc.world.laser import (
     unicycle_model,
     unicycle_step,
 )
-from swarmloc.world.maps import SegmentMap, build_map, free_space_sample
+from swarmloc.world.laser.maps import SegmentMap, build_map, free_space_sample
 
 
 def box_map(width_m: float = 4.0, height_m: float = 2.0) -> SegmentMap:

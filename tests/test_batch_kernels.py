@@ -1,4 +1,4 @@
-"""Tests of the compiled kernels behind the batch engine (world/kernels.py, agents/kernels.py).
+"""Tests of the compiled kernels behind the batch engine (world/epuck/kernels.py, agents/kernels.py).
 
 The kernels must give exactly what the models specify, whatever the swarm's layout: their
 neighbour search is checked against brute force, the collision kernel against the KD-tree version
@@ -35,18 +35,18 @@ from swarmloc.protocol.epuck import (
     on_path,
     wrap_angle,
 )
-from swarmloc.world import kernels
-from swarmloc.world.arena import (
+from swarmloc.world.epuck import kernels
+from swarmloc.world.epuck.arena import (
     Arena,
     Disc,
     _resolve_collisions_kdtree,
     area_at,
     resolve_collisions,
 )
-from swarmloc.world.foraging import ForagingWorld
-from swarmloc.world.medium import deliver
-from swarmloc.world.metrics import ForagingMetrics
-from swarmloc.world.sensors import ground_sensors, ir_proximity
+from swarmloc.world.epuck.foraging import ForagingWorld
+from swarmloc.world.epuck.medium import deliver
+from swarmloc.world.epuck.metrics import ForagingMetrics
+from swarmloc.world.epuck.sensors import ground_sensors, ir_proximity
 
 R = 0.035
 
@@ -373,8 +373,8 @@ def _reference_observe(world, pose, rng):
 
 
 def _reference_step(world, pose, cmd, sending, rng):
-    """What step() must do, from the public model functions: the medium (world/medium.py:
-    deliver), the slip, the kinematics (protocol/epuck.py) and the collisions (world/arena.py)."""
+    """What step() must do, from the public model functions: the medium (world/epuck/medium.py:
+    deliver), the slip, the kinematics (protocol/epuck.py) and the collisions (world/epuck/arena.py)."""
     cfg, body = world.config, world.config.body
     alive = world.alive
     steps = np.where(alive[:, None], np.clip(cmd, -body.max_wheel_speed_steps_s, body.max_wheel_speed_steps_s)

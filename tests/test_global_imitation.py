@@ -16,7 +16,7 @@ from swarmloc.agents.global_imitation import (
 from swarmloc.deploy.batch import run_batch, swarm_brain
 from swarmloc.deploy.cli import main
 from swarmloc.deploy.scenario import load_scenario
-from swarmloc.world.foraging import ForagingWorld
+from swarmloc.world.epuck.foraging import ForagingWorld
 
 
 def _state(n):
@@ -166,7 +166,7 @@ def test_processes_refuse_the_central_strategy_before_starting(command, capsys, 
 
 
 def test_world_service_refuses_the_central_strategy():
-    from swarmloc.world.service import _foraging
+    from swarmloc.world.epuck.service import _foraging
 
     with pytest.raises(ValueError, match="GLOBAL"):
         _foraging(load_scenario("ES1", ["agent.strategy=GLOBAL"]))

@@ -27,7 +27,7 @@ from swarmloc.deploy.scenario import load_scenario
 from swarmloc.protocol.keys import Keys
 from swarmloc.protocol.messages import EpuckAct, WorldState, decode, encode
 from swarmloc.protocol.session import open_session, session_config
-from swarmloc.world.foraging import ForagingWorld
+from swarmloc.world.epuck.foraging import ForagingWorld
 
 pytestmark = pytest.mark.integration
 

@@ -1,8 +1,8 @@
-"""Tests of the laser world (world/laser_world.py), the in-process runner (deploy/laser_batch.py)
+"""Tests of the laser world (world/laser/world.py), the in-process runner (deploy/laser_batch.py)
 and the laser experiments and report (deploy/laser_experiment.py, deploy/laser_report.py).
 
 Expected values come from hand geometry (distances and walls of the built-in maps, see
-world/maps.py), from the laws of the noise (loss rate: binomial, tolerance stated), or from an
+world/laser/maps.py), from the laws of the noise (loss rate: binomial, tolerance stated), or from an
 independent computation (a dead-reckoning localizer written here, ``cast_rays``).
 """
 
@@ -41,8 +41,8 @@ from swarmloc.deploy.laser_report import (
     wilson_interval,
     write_report,
 )
-from swarmloc.world.laser import LaserParams, cast_rays, unicycle_model
-from swarmloc.world.laser_world import (
+from swarmloc.world.laser.laser import LaserParams, cast_rays, unicycle_model
+from swarmloc.world.laser.world import (
     DriverConfig,
     Kidnap,
     LaserWorld,
@@ -50,7 +50,7 @@ from swarmloc.world.laser_world import (
     RadioConfig,
     RobotPath,
 )
-from swarmloc.world.maps import SegmentMap, build_map, distance_to_walls
+from swarmloc.world.laser.maps import SegmentMap, build_map, distance_to_walls
 
 # ---------------------------------------------------------------------------------------------
 # Helpers: still robots, a dead-reckoning localizer

@@ -28,14 +28,14 @@ from swarmloc.agents.mrclam_localizers import (
     sgikf_fuse,
 )
 from swarmloc.deploy.mrclam import ReplayConfig, fit_camera, run_replay, score
-from swarmloc.world.mrclam import (
+from swarmloc.world.replay.mrclam import (
     MrclamFormatError,
     SyntheticConfig,
     load_dataset,
     synthesize,
     write_dataset,
 )
-from swarmloc.world.replay import LandmarkObservation, Message, ReplayWorld, mean_commands
+from swarmloc.world.replay.replay import LandmarkObservation, Message, ReplayWorld, mean_commands
 
 DATASET6 = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "mrclam" / "MRCLAM_Dataset6"
 needs_dataset6 = pytest.mark.skipif(

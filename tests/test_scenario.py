@@ -12,7 +12,7 @@ from swarmloc.config import ConfigError, apply_overrides, from_dict, parse_value
 from swarmloc.deploy.batch import run_batch
 from swarmloc.deploy.cli import main
 from swarmloc.deploy.scenario import Scenario, builtin_names, load_scenario
-from swarmloc.world.foraging import WorldConfig
+from swarmloc.world.epuck.foraging import WorldConfig
 
 SO_NAMES = ["SO-3.0x3.0", "SO-3.5x3.5", "SO-4.0x4.0", "SO-4.5x4.5"]
 

@@ -47,7 +47,7 @@ from swarmloc.agents.ssga import (
     mutation_std,
     network_mating,
 )
-from swarmloc.world.laser import (
+from swarmloc.world.laser.laser import (
     LaserParams,
     MotionNoise,
     cast_rays,
@@ -56,7 +56,7 @@ from swarmloc.world.laser import (
     unicycle_step,
     wrap_angle,
 )
-from swarmloc.world.maps import SegmentMap, build_map
+from swarmloc.world.laser.maps import SegmentMap, build_map
 
 FOUR_BEAMS = np.arange(4) * (math.pi / 2.0)  # ahead, left, behind, right
 
@@ -447,8 +447,8 @@ def test_eq2_with_the_worlds_own_sightings_and_radio():
     replication agree: in a noise-free laser world, robot 0's individual kept at its true pose
     scores exactly (1 + 1) * peak at every step at which it holds a teammate's scan and the
     matching sighting, while both robots drive and turn in the corridor of `aliased_rooms`."""
-    from swarmloc.world.laser import RelativeNoise
-    from swarmloc.world.laser_world import (
+    from swarmloc.world.laser.laser import RelativeNoise
+    from swarmloc.world.laser.world import (
         DriverConfig,
         LaserWorld,
         LaserWorldConfig,

@@ -31,8 +31,8 @@ from swarmloc.agents.vision_agent import (
 )
 from swarmloc.deploy import vision_batch as vb
 from swarmloc.deploy.cli import main as cli_main
-from swarmloc.world.camera import CameraParams, make_object, render
-from swarmloc.world.vision_world import (
+from swarmloc.world.vision.camera import CameraParams, make_object, render
+from swarmloc.world.vision.world import (
     FieldObject,
     RobotStart,
     VisionObservation,

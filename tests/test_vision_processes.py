@@ -20,7 +20,7 @@ from swarmloc.deploy.scenario import load_any
 from swarmloc.deploy.vision_batch import run_vision, world_config
 from swarmloc.protocol.errors import ErrorCounter
 from swarmloc.protocol.messages import VisionSense, Welcome
-from swarmloc.world.vision_world import VisionWorld
+from swarmloc.world.vision.world import VisionWorld
 
 pytestmark = pytest.mark.integration
 

@@ -9,7 +9,7 @@ from ``swarmloc.protocol.epuck``.
   perimeter; the distance ``d`` to the nearest wall or robot body (ray-circle intersection)
   gives ``clip(1 - d / ir_range_m, 0, 1)`` (1 = touching, 0 = nothing in range), then
   multiplicative noise ``1 + U(-f, f)``, clipped to [0, 1].
-- :func:`ground_sensors`: floor reflectance (``world/arena.py``) under each ground sensor, times
+- :func:`ground_sensors`: floor reflectance (``world/epuck/arena.py``) under each ground sensor, times
   ``1 + U(-f, f)``.
   What a robot concludes from the readings is the agent's business
   (``swarmloc.agents.foraging.classify_ground``).
@@ -18,7 +18,7 @@ Random draws (fixed order, so a run is deterministic given ``rng``): :func:`ir_p
 ``rng.uniform(-f, f, size=(N, 8))`` call; :func:`ground_sensors` one
 ``rng.uniform(-f, f, size=(N, 3))`` call. Both draw even when the noise fraction is 0.
 All functions work on a batch of robots: poses ``(N, 3)`` = (x_m, y_m, theta_rad). The loops
-are compiled kernels (``world/kernels.py``); the noises are drawn here as ``rng.random``, which
+are compiled kernels (``world/epuck/kernels.py``); the noises are drawn here as ``rng.random``, which
 gives exactly the numbers of ``rng.uniform(-f, f)`` (the kernel computes ``-f + 2 f u``).
 """
 
@@ -30,8 +30,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from swarmloc.protocol.epuck import GROUND_SENSOR_OFFSETS_M, IR_SENSOR_ANGLES_RAD
-from swarmloc.world import kernels
-from swarmloc.world.arena import (
+from swarmloc.world.epuck import kernels
+from swarmloc.world.epuck.arena import (
     REFLECTANCE_BY_AREA,
     Arena,
     arena_discs,
@@ -77,7 +77,7 @@ def ir_proximity(
     Sensor ``s`` sits on the body perimeter at ``IR_SENSOR_ANGLES_RAD[s]`` from the heading and
     looks radially outward. Obstacles: the 4 walls and the other robots (circles of
     ``body_radius_m``; candidates from a spatial hash grid within ``2 * body_radius_m +
-    ir_range_m``, in the compiled kernel of ``world/kernels.py``).
+    ir_range_m``, in the compiled kernel of ``world/epuck/kernels.py``).
     A sensor whose spot lies outside the walls or inside another body reads distance 0.
     Value ``clip(1 - d / ir_range_m, 0, 1) * (1 + U(-f, f))`` clipped to [0, 1], with ``f`` the
     IR noise fraction; one ``(N, 8)`` uniform draw.

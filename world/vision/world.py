@@ -10,7 +10,7 @@ moves the robots by their velocity and head commands.
 Per tick ``k`` (lockstep, ``tick_s`` apart):
 
 1. :meth:`VisionWorld.observe` renders every robot's camera image from its *true* pose and head
-   pan with ``swarmloc.world.camera.render`` (pinhole, f = 190 px, 208 x 160 px, occlusion, a
+   pan with ``swarmloc.world.vision.camera.render`` (pinhole, f = 190 px, 208 x 160 px, occlusion, a
    per-frame brightness gain for lighting variation and Gaussian pixel noise), and encodes it as
    JPEG (default, quality 90, 4:4:4 chroma so that small colour blobs keep their size) or PNG with
    ``cv2.imencode``. Other robots are drawn as ``"teammate"`` (yellow) cylinders if they are on the
@@ -33,7 +33,7 @@ Per tick ``k`` (lockstep, ``tick_s`` apart):
    (robots "catch" it by reaching it).
 
 Randomness: one generator, ``default_rng([seed, 0])``, drawn in a fixed order: per observe, for
-each robot in index order, the camera's gain and noise (see ``world/camera.py``); per step, one
+each robot in index order, the camera's gain and noise (see ``world/vision/camera.py``); per step, one
 ``normal(size=(N, 4))`` (three translation/rotation factors and the drift). Same seed, same run.
 
 Coordinates: metres, radians, counter-clockwise; a robot's body frame has x forward, y left.
@@ -47,7 +47,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from swarmloc.world.camera import OBJECT_KINDS, CameraParams, SceneObject, make_object, render
+from swarmloc.world.vision.camera import OBJECT_KINDS, CameraParams, SceneObject, make_object, render
 
 #: Stream id of the world's generator (``[seed, stream]``).
 WORLD_STREAM = 0

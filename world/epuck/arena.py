@@ -3,12 +3,12 @@
 The arena of seed 000 §6.1 (fig. 7, table 2) and seed 001 §4.1 is a walled rectangle with a
 white floor and two circular goal areas: the *nest* (central place), painted black, and the
 *prey* (resource site), painted grey. The e-puck ground sensors tell them apart by reflectance
-(seed 000 §5, §6.1; ``world/sensors.py`` adds the ±30 % noise).
+(seed 000 §5, §6.1; ``world/epuck/sensors.py`` adds the ±30 % noise).
 
 Physics is kinematic, as is usual for e-puck swarm simulators at 10 Hz: after the world moves the
 bodies, :func:`resolve_collisions` pushes overlapping discs apart along their centre line and
 clamps every body inside the walls. It is deterministic and scales to thousands of robots: a
-compiled kernel on a spatial hash grid (``world/kernels.py``), with a vectorised KD-tree version
+compiled kernel on a spatial hash grid (``world/epuck/kernels.py``), with a vectorised KD-tree version
 (``np.bincount`` sums the pushes) for crowds, where the order of the sums is the KD-tree's.
 
 Coordinates: metres, walls at ``x = 0``, ``x = width_m``, ``y = 0``, ``y = height_m``.
@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from swarmloc.world import kernels
+from swarmloc.world.epuck import kernels
 
 #: Ground reflectance of the three floor colours (dimensionless, white = 1).
 GROUND_WHITE = 1.0
@@ -156,7 +156,7 @@ def resolve_collisions(
     randomness.
 
     When every body is movable (the world's case) a compiled kernel does the work on a cell grid
-    (``world/kernels.py``); it hands over to the vectorised KD-tree version, which defines the
+    (``world/epuck/kernels.py``); it hands over to the vectorised KD-tree version, which defines the
     summation order of the pushes, whenever a body overlaps three or more others at once.
     """
     pos = np.array(position_m, dtype=float, copy=True)

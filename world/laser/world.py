@@ -11,7 +11,7 @@ Per step ``k`` (lockstep):
 1. :meth:`LaserWorld.observe` gives every robot its :class:`~swarmloc.agents.localizer.LaserObservation`
    at the current true poses: the odometry of the last move (the *commanded* increments, eq. 3
    of 002: the true robot moved by noisy ones), its laser scan (eq. 4 of 002 + Gaussian noise,
-   :func:`~swarmloc.world.laser.scan`), the teammates it sees (noisy distance, bearing and
+   :func:`~swarmloc.world.laser.laser.scan`), the teammates it sees (noisy distance, bearing and
    relative heading of robots within the relative-sensor range and in line of sight: 002 §3.2,
    table 2 "V"; 003 §IV-B, table I "Q_rd", "Q_ro"), and the radio messages teammates sent at
    ``k-1`` that the radio medium delivered.
@@ -71,7 +71,7 @@ from swarmloc.agents.localizer import (
     RadioMessage,
     Sighting,
 )
-from swarmloc.world.laser import (
+from swarmloc.world.laser.laser import (
     LaserParams,
     MotionNoise,
     RelativeNoise,
@@ -81,7 +81,7 @@ from swarmloc.world.laser import (
     visible_pairs,
     wrap_angle,
 )
-from swarmloc.world.maps import MAPS, SegmentMap, distance_to_walls, line_of_sight
+from swarmloc.world.laser.maps import MAPS, SegmentMap, distance_to_walls, line_of_sight
 
 #: Stream id of the world's generator (``[seed, stream]``); agents use stream 1 with their id.
 WORLD_STREAM = 0

@@ -1,6 +1,6 @@
 """The laser world of seeds 002/003 served to agent processes (one localizer per process).
 
-A :class:`~swarmloc.world.service.ServedWorld` around :class:`~swarmloc.world.laser_world.LaserWorld`:
+A :class:`~swarmloc.world.service.ServedWorld` around :class:`~swarmloc.world.laser.world.LaserWorld`:
 each tick it sends every live robot a :class:`LaserSense` (odometry, scan, sightings, the radio
 messages of the previous tick), takes each :class:`EstimateAct` (pose estimate, broadcast), scores
 the estimates against the true poses the observation was taken at, and steps the world with the
@@ -32,7 +32,7 @@ class LaserService(DrivenRobots):
     act_type = EstimateAct
 
     def __init__(self, scenario) -> None:
-        from swarmloc.world.laser_world import WORLD_STREAM, LaserWorld
+        from swarmloc.world.laser.world import WORLD_STREAM, LaserWorld
 
         self.scenario = scenario
         config = scenario.world

@@ -72,7 +72,7 @@ class ReplayScenario:
 
     @functools.cached_property
     def _loaded(self):
-        from swarmloc.world.mrclam import load_dataset
+        from swarmloc.world.replay.mrclam import load_dataset
 
         try:
             return load_dataset(self.dataset)

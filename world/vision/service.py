@@ -1,6 +1,6 @@
 """The vision world of seed 004 served to agent processes (one vision brain per process).
 
-A :class:`~swarmloc.world.service.ServedWorld` around :class:`~swarmloc.world.vision_world.VisionWorld`:
+A :class:`~swarmloc.world.service.ServedWorld` around :class:`~swarmloc.world.vision.world.VisionWorld`:
 each frame it sends every live robot a :class:`VisionSense` (its encoded camera image, odometry and
 head pan), takes each :class:`VisionAct` (walking command, head command, and the agent's
 estimates), scores the estimates against ground truth, and steps the world. Detections travel
@@ -36,8 +36,8 @@ class VisionService:
 
     def __init__(self, scenario) -> None:
         from swarmloc.deploy.vision_batch import world_config
-        from swarmloc.world.camera import OBJECT_KINDS
-        from swarmloc.world.vision_world import STOP, VisionWorld
+        from swarmloc.world.vision.camera import OBJECT_KINDS
+        from swarmloc.world.vision.world import STOP, VisionWorld
 
         self.scenario = scenario
         self.seed = scenario.world.seed
@@ -83,7 +83,7 @@ class VisionService:
         return self._alive
 
     def kill(self, robot: int) -> None:
-        from swarmloc.world.vision_world import STOP
+        from swarmloc.world.vision.world import STOP
 
         self._alive[robot] = False
         self._commands[robot] = STOP  # a robot whose agent died stands still
@@ -136,7 +136,7 @@ class VisionService:
                 self.reach_time[i] = time_s
 
     def step(self, acts: list[VisionAct | None]) -> None:
-        from swarmloc.world.vision_world import VisionCommand
+        from swarmloc.world.vision.world import VisionCommand
 
         world = self.world
         for i, act in enumerate(acts):

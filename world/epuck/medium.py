@@ -14,7 +14,7 @@ carries about 5 kbit/s, ~62 bytes per 100 ms tick; enforcing it on payloads is t
 and a decoding cap (``max_received_per_tick``): a receiver keeps only the nearest few messages.
 
 :func:`deliver` works on the whole swarm at once: candidate pairs come from a spatial hash grid
-in a compiled kernel (``world/kernels.py``), never from a Python loop over robots. Random draws,
+in a compiled kernel (``world/epuck/kernels.py``), never from a Python loop over robots. Random draws,
 in this fixed order:
 
 1. ``rng.random(M)``: one loss uniform per candidate (sender, receiver) pair, candidates sorted
@@ -35,7 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from swarmloc.world import kernels
+from swarmloc.world.epuck import kernels
 
 
 def _is_number(value) -> bool:
@@ -152,7 +152,7 @@ def deliver(
     if k == 0:
         return _empty()  # nothing survived: no noise to draw
     # 2. Range noise, 3. bearing noise, both in (receiver, sender) order: one random(2K) call
-    # gives the same numbers as uniform(K) twice (world/kernels.py: uniform).
+    # gives the same numbers as uniform(K) twice (world/epuck/kernels.py: uniform).
     rn, bn = medium.range_noise_m, medium.bearing_noise_rad
     range_m, bearing_rad = kernels.rab_measure(
         survivors.dist_m, rng.random(2 * k), -rn, rn - -rn, survivors.bearing_atan(),
@@ -193,7 +193,7 @@ def crossing(
     if sending.shape != (n,):
         raise ValueError(f"sending must have shape ({n},), got {sending.shape}")
 
-    # Candidates from a cell grid (world/kernels.py), already in (receiver, sender) order.
+    # Candidates from a cell grid (world/epuck/kernels.py), already in (receiver, sender) order.
     if n >= 2 and sending.any():
         if pairs is None:
             sender, receiver, dist_m, rel_x, rel_y = kernels.rab_candidates(pose, sending, medium.range_m)

@@ -1,7 +1,7 @@
 """The replay world: an MRCLAM data set fed to the robots' localizers tick by tick, in lockstep.
 
 Instead of simulating, this world replays what the real robots recorded (see
-:mod:`swarmloc.world.mrclam`). It has the world's per-tick shape, so the same localizer objects
+:mod:`swarmloc.world.replay.mrclam`). It has the world's per-tick shape, so the same localizer objects
 run here in-process and, behind a world-server shell, over Zenoh:
 
     world = ReplayWorld(dataset, dt_s=0.02)
@@ -47,7 +47,7 @@ import numpy as np
 
 from swarmloc.agents.localizer import RadioMessage
 from swarmloc.protocol.messages import MAX_RADIO_PAYLOAD_BYTES
-from swarmloc.world.mrclam import MrclamDataset, RobotRecord
+from swarmloc.world.replay.mrclam import MrclamDataset, RobotRecord
 
 #: Default tick length, see the module docstring.
 DEFAULT_DT_S = 0.02

@@ -1,5 +1,5 @@
-"""Compiled (numba) kernels of the e-puck world models: the inner loops of ``world/sensors.py``,
-``world/medium.py``, ``world/arena.py``, ``world/metrics.py`` and the kinematics of
+"""Compiled (numba) kernels of the e-puck world models: the inner loops of ``world/epuck/sensors.py``,
+``world/epuck/medium.py``, ``world/epuck/arena.py``, ``world/epuck/metrics.py`` and the kinematics of
 ``protocol/epuck.py``, over a batch of robots.
 
 They are not a second implementation: the public model functions (``ir_proximity``,
@@ -27,7 +27,7 @@ in O(N); the 3 x 3 cells around a robot hold every candidate (:func:`neighbour_p
 of the same tick reuse them (the collisions only while nobody has moved far enough for a new
 contact to come from elsewhere, else they search again): the same pairs as a fresh search.
 Collisions where a body touches three or more others go back to the KD-tree version of
-``world/arena.py``, whose summation order defines the result.
+``world/epuck/arena.py``, whose summation order defines the result.
 
 Per tick the world makes two kernel calls with preallocated outputs and its constants packed in
 one array (:func:`world_params`): numba checks the type of every argument of every call and
@@ -717,7 +717,7 @@ def world_params(*, body_radius_m, ir_range_m, width_m, height_m, ir_noise, grou
 def observe_tick(pose, params, cos_a, sin_a, offsets, discs, reflectance, rng_fn, rng_state, ir, ground, pair_ij,
                  pair_f, pair_scratch, snapshot, counts, crossed_ij, crossed_f, alive, d_sender, d_receiver, d_range,
                  d_bearing, trig, trig_pose, noise_u):
-    """``ForagingWorld.observe`` in one call: the IR and ground readings of ``world/sensors.py``
+    """``ForagingWorld.observe`` in one call: the IR and ground readings of ``world/epuck/sensors.py``
     (:func:`ir_readings`, :func:`ground_readings`) into ``ir`` ``(N, S)`` and ``ground`` ``(N, G)``,
     their noises drawn from the world's generator (``rng_fn``, ``rng_state``: see
     :func:`~swarmloc.numerics.generator_address`) as one ``random(N S + N G)``: the IR noises, then the ground ones.
@@ -778,7 +778,7 @@ def step_tick(pose, cmd, alive, sending, on_path, params, discs, rng_fn, rng_sta
               snapshot, counts, pose_out, encoder_out, crossed_ij, crossed_f, tick, first_visit_tick, round_trips, stage,
               stage_codes, trig, trig_pose, per_robot, work_i, work_f, step_u):
     """``ForagingWorld.step`` in one call, drawing from the world's generator (see
-    :func:`observe_tick`) in the order of ``world/medium.py`` and ``ForagingWorld.step``.
+    :func:`observe_tick`) in the order of ``world/epuck/medium.py`` and ``ForagingWorld.step``.
 
     1. The medium (:func:`rab_candidates_from_pairs` on the pairs of :func:`observe_tick` if
        ``pose`` equals its ``snapshot``, else :func:`rab_candidates`; then a loss uniform per

@@ -16,9 +16,9 @@ Per tick ``k`` (lockstep, seed 000 §5 controller clock of 10 Hz):
 The world owns all physical randomness, one generator drawn in a fixed order (IR noise, ground
 noise; loss, range noise, bearing noise, slip), so that a seeded run is the same whether the
 agents are processes or the batch engine's arrays. Consecutive draws are merged into one
-``random`` call where that gives the same numbers (see ``world/kernels.py``: ``uniform``). Each
+``random`` call where that gives the same numbers (see ``world/epuck/kernels.py``: ``uniform``). Each
 of :meth:`ForagingWorld.observe` and :meth:`ForagingWorld.step` is one call of a compiled kernel
-of ``world/kernels.py`` (``observe_tick``, ``step_tick``), which draws from the world's generator
+of ``world/epuck/kernels.py`` (``observe_tick``, ``step_tick``), which draws from the world's generator
 itself, the same numbers in the same order. A dead robot (``alive`` false) stands still, sends
 nothing and hears nothing; it stays an obstacle.
 """
@@ -32,17 +32,17 @@ import numpy as np
 from swarmloc import numerics
 from swarmloc.protocol.epuck import GROUND_SENSOR_OFFSETS_M, IR_SENSOR_ANGLES_RAD, EpuckBody
 from swarmloc.protocol.messages import MAX_RAB_PAYLOAD_BYTES, MAX_RECEIVED
-from swarmloc.world import kernels
-from swarmloc.world.arena import (
+from swarmloc.world.epuck import kernels
+from swarmloc.world.epuck.arena import (
     REFLECTANCE_BY_AREA,
     Arena,
     Disc,
     arena_discs,
     resolve_collisions,
 )
-from swarmloc.world.medium import Deliveries, RabMedium
-from swarmloc.world.metrics import ForagingMetrics
-from swarmloc.world.sensors import SensorParams
+from swarmloc.world.epuck.medium import Deliveries, RabMedium
+from swarmloc.world.epuck.metrics import ForagingMetrics
+from swarmloc.world.epuck.sensors import SensorParams
 
 _COS_IR = np.cos(IR_SENSOR_ANGLES_RAD)
 _SIN_IR = np.sin(IR_SENSOR_ANGLES_RAD)
@@ -207,7 +207,7 @@ class ForagingWorld:
         self.encoder_steps = np.zeros((n, 2))
         self.metrics = ForagingMetrics(n, config.tick_s)
         self._n_ticks = config.n_ticks
-        # The compiled tick (world/kernels.py: observe_tick, step_tick): constants, and buffers
+        # The compiled tick (world/epuck/kernels.py: observe_tick, step_tick): constants, and buffers
         # that the two calls share. Pairs for the IR sensors, the medium and the collisions of the
         # step after are found when sensing, within the larger of the two reaches.
         body, medium = config.body, config.medium
@@ -242,7 +242,7 @@ class ForagingWorld:
         self._math = numerics.numpy_math()  # numpy's arctan2, bit for bit
 
     def _pair_buffers(self, capacity: int) -> None:
-        """Room for ``capacity`` neighbour pairs (world/kernels.py: neighbour_pairs_into) and for
+        """Room for ``capacity`` neighbour pairs (world/epuck/kernels.py: neighbour_pairs_into) and for
         the messages they may carry (step_tick's scratch)."""
         self._counts[_C_PAIRS] = -1  # the pairs found, if any, were in the old buffers
         self._pair_ij = np.empty((2, capacity), np.int64)
@@ -269,9 +269,9 @@ class ForagingWorld:
 
     def observe(self) -> Observation:
         """Every robot's percepts at the current poses (one compiled call: see
-        ``world/kernels.py: observe_tick``). Draws: IR noise ``(N, 8)`` then ground noise
+        ``world/epuck/kernels.py: observe_tick``). Draws: IR noise ``(N, 8)`` then ground noise
         ``(N, 3)``, as one ``random(11 N)``: the numbers of ir_proximity's and ground_sensors'
-        two ``uniform()`` calls (world/sensors.py)."""
+        two ``uniform()`` calls (world/epuck/sensors.py)."""
         if self.tick == 0:
             _load_kernels(self.config)
         n, counts = self._n, self._counts
@@ -295,13 +295,13 @@ class ForagingWorld:
         ``(N,)``: who broadcasts (dead robots never do); ``on_path`` ``(N,)``: who forages on the
         path, for the metrics.
 
-        In one compiled call (``world/kernels.py: step_tick``): the board measures range and
+        In one compiled call (``world/epuck/kernels.py: step_tick``): the board measures range and
         bearing when the message crosses, at the poses the senders computed their content from;
-        receivers hear it at the next tick. The medium's draws (world/medium.py: loss, then range
+        receivers hear it at the next tick. The medium's draws (world/epuck/medium.py: loss, then range
         and bearing noises) come first, then the slip of each wheel as U(-slip, slip), the
         non-systematic odometry error: one random() call for the noises and the slips gives the
         same numbers as three uniform() calls. Then the encoders (commanded steps) and the true
-        motion ((1 + u) times that, eq. 3-7), collisions (world/arena.py: resolve_collisions)
+        motion ((1 + u) times that, eq. 3-7), collisions (world/epuck/arena.py: resolve_collisions)
         and the foraging metrics of the true area under each robot's middle ground sensor.
         """
         n = self._n
@@ -319,7 +319,7 @@ class ForagingWorld:
         on_path_count = kernels.step_tick(*self._step_args(cmd, sending, on_path, pose, encoder))
         self._finish_step(pose, encoder, self.tick + 1, on_path_count, on_path)
 
-    # The arguments of world/kernels.py: observe_tick and step_tick, in their order: also for the
+    # The arguments of world/epuck/kernels.py: observe_tick and step_tick, in their order: also for the
     # batch engine's compiled tick (deploy/batch.py), which calls them from there.
 
     def _observe_args(self, pose, ir, ground, sender, receiver, range_m, bearing_rad) -> tuple:

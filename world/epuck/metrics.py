@@ -17,8 +17,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from swarmloc.world import kernels
-from swarmloc.world.arena import AREA_NEST, AREA_PREY
+from swarmloc.world.epuck import kernels
+from swarmloc.world.epuck.arena import AREA_NEST, AREA_PREY
 
 # Round-trip stage of each robot.
 _NO_NEST = 0  # has not been in the nest yet
@@ -78,7 +78,7 @@ class ForagingMetrics:
 
     def kernel_state(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """``(first_visit_tick, round_trips, stage, STAGE_CODES)``: the arrays that the world's
-        compiled step (``world/kernels.py: step_tick``) updates in place, as :meth:`update`
+        compiled step (``world/epuck/kernels.py: step_tick``) updates in place, as :meth:`update`
         does, before it calls :meth:`counted`."""
         return self.first_visit_tick, self.round_trips, self._stage, STAGE_CODES
 

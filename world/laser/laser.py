@@ -41,7 +41,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from swarmloc.world.maps import SegmentMap, line_of_sight
+from swarmloc.world.laser.maps import SegmentMap, line_of_sight
 
 #: Upper bound on float32 elements of the (poses, beams, 2 * segments) product per chunk:
 #: about 0.5 MB, so the intermediate arrays stay in cache and are not page-faulted in afresh on

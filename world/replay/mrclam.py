@@ -373,7 +373,7 @@ _TITLE = {
 
 def _write_table(path: Path, kind: str, columns: list[tuple[np.ndarray, str]]) -> None:
     """One file in the published layout: 4 header lines, ``value \\t value`` rows, CRLF."""
-    header = [_HEADER, "# produced by swarmloc.world.mrclam.write_dataset (synthetic)",
+    header = [_HEADER, "# produced by swarmloc.world.replay.mrclam.write_dataset (synthetic)",
               f"# {_TITLE[kind]} Data Fomat:", _FORMAT_LINE[kind]]
     n = len(columns[0][0]) if columns else 0
     parts = [[fmt.format(v) for v in values] for values, fmt in columns]

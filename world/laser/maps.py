@@ -1,7 +1,7 @@
 """Segment maps for the map-based laser robots, and the geometry queries the world needs on them.
 
 Seed 002 (MR-SSGA) §4 describes the environment "entirely by a list M of pairs of points": wall
-segments, against which eq. 4 computes laser ranges (``world/laser.py``). The builders here give the
+segments, against which eq. 4 computes laser ranges (``world/laser/laser.py``). The builders here give the
 environments the two laser seeds use:
 
 - ``office``: an office-like floor with rooms of different sizes on both sides of a corridor
