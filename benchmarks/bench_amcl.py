@@ -1,4 +1,4 @@
-"""Speed of the AMCL-style particle filter (agents/amcl.py), the baseline of seeds 002 and 003.
+"""Speed of the AMCL-style particle filter (agents/laser/amcl.py), the baseline of seeds 002 and 003.
 
 Issue 4's target: at 5,000 particles, at least 20 updates per second on one core with the 18-beam
 laser of seed 003 (table I: L = 18, l = 8 m). One update is ``AMCLLocalizer.step``: motion
@@ -27,8 +27,8 @@ import time
 
 import numpy as np
 
-from swarmloc.agents.amcl import AMCLLocalizer, AMCLParams, BeliefSummary, encode_belief
-from swarmloc.agents.localizer import (
+from swarmloc.agents.laser.amcl import AMCLLocalizer, AMCLParams, BeliefSummary, encode_belief
+from swarmloc.agents.laser.localizer import (
     LaserObservation,
     LocalizerSetup,
     RadioMessage,

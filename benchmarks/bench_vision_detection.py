@@ -5,7 +5,7 @@ Prints, on one core:
 1. CPU milliseconds per frame (``time.process_time``, median over 500 frames; the scene of
    ``bench_vision.py``: a ball, two teammates, two rivals and a beacon): render + detect (the
    issue's budget: 5 ms), and the path an agent's frame takes: render + JPEG encode (world) +
-   decode + detect + the agent's detections (``swarmloc.agents.vision_agent``).
+   decode + detect + the agent's detections (``swarmloc.agents.vision.brain``).
    Also the CPU of one ``VisionBrain.step`` (the agent's whole tick) on experiment 1.
 2. ``swarmloc.deploy.vision_batch.detection_accuracy``: detection rate and median bearing and
    distance errors of every object kind over distance, and of the ball and a teammate partly
@@ -29,7 +29,7 @@ import time
 import cv2
 import numpy as np
 
-from swarmloc.agents.vision_agent import (
+from swarmloc.agents.vision.brain import (
     VisionAgentConfig,
     VisionBrain,
 )

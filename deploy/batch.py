@@ -7,7 +7,7 @@ float32 they cross the wire with), so a seeded run gives the same trajectories a
 and over processes.
 
 A tick is ``world.observe()``, ``brain.step(...)``, then ``world.step(...)``, each one call of a
-compiled kernel (``world/epuck/kernels.py: observe_tick, step_tick``, ``agents/kernels.py:
+compiled kernel (``world/epuck/kernels.py: observe_tick, step_tick``, ``agents/epuck/kernels.py:
 brain_tick``). :func:`run_ticks` makes the same three calls from one compiled function
 (:func:`batch_tick`: a world's step, the next observation and the brains' step), without the
 Python objects in between (Observation, Inbox, BrainOutput): at 100 robots that glue cost as much
@@ -24,9 +24,9 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from swarmloc.agents import kernels as agent_kernels
-from swarmloc.agents.foraging import BrainOutput, ForagingBrain, Inbox, agent_rng
-from swarmloc.agents.global_imitation import central_rng, imitate_brain
+from swarmloc.agents.epuck import kernels as agent_kernels
+from swarmloc.agents.epuck.foraging import BrainOutput, ForagingBrain, Inbox, agent_rng
+from swarmloc.agents.epuck.global_imitation import central_rng, imitate_brain
 from swarmloc.deploy.scenario import Scenario
 from swarmloc.world.epuck import kernels as world_kernels
 from swarmloc.world.epuck.foraging import ForagingWorld, Observation
@@ -121,7 +121,7 @@ def batch_tick(
     o_pose, o_params, o_cos_a, o_sin_a, o_offsets, o_discs, o_reflectance, o_rng_fn, o_rng_state, o_ir,
     o_ground, o_pair_ij, o_pair_f, o_pair_scratch, o_snapshot, o_counts, o_crossed_ij, o_crossed_f, o_alive,
     o_sender, o_receiver, o_range_m, o_bearing_rad, o_trig, o_trig_pose, o_noise_u,
-    # agents/kernels.py: brain_tick's arguments but the percepts and the inbox's deliveries
+    # agents/epuck/kernels.py: brain_tick's arguments but the percepts and the inbox's deliveries
     b_encoder_steps, b_tick,
     b_previous_pose, b_pose, b_frame_pose, b_robot_ids, b_known, b_goal_xy, b_goal_p_m, b_goal_cov, b_target,
     b_searching, b_search_left_m, b_lost_count, b_visit_ticks, b_turn_ticks, b_straight_ticks, b_turn_dir,

@@ -79,7 +79,7 @@ def _refuse_central(loaded) -> None:
     true poses (seed 001's global imitation): say so before anything starts."""
     if loaded.family != "foraging":
         return
-    from swarmloc.agents.social_odometry import STRATEGIES
+    from swarmloc.agents.epuck.social_odometry import STRATEGIES
 
     name = loaded.scenario.agent.strategy
     if STRATEGIES[name].central:

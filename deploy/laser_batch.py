@@ -12,7 +12,7 @@ Unknown keys and impossible values are refused with a message naming them before
 Per step ``k`` (the lockstep of ARCHITECTURE.md): ``world.observe()`` -> each robot's
 ``localizer.step(obs)`` -> ``localizer.estimate()`` is compared with the true pose of that
 observation -> ``localizer.outgoing()`` -> ``world.step(outgoing)``. Each robot's localizer gets
-its own generator derived from (seed, robot id) (:func:`~swarmloc.agents.foraging.agent_rng`);
+its own generator derived from (seed, robot id) (:func:`~swarmloc.agents.epuck.foraging.agent_rng`);
 the world's is ``default_rng([seed, 0])``. So a run is a function of the scenario and its seed.
 
 Errors, as the papers measure them: 003 §V "at each iteration of a given trial, a pose error was
@@ -68,8 +68,8 @@ from typing import Any
 
 import numpy as np
 
-from swarmloc.agents.foraging import agent_rng
-from swarmloc.agents.localizer import Localizer, LocalizerSetup
+from swarmloc.agents.epuck.foraging import agent_rng
+from swarmloc.agents.laser.localizer import Localizer, LocalizerSetup
 from swarmloc.config import ConfigError, apply_overrides, from_dict, load_toml, to_dict
 from swarmloc.world.laser.laser import wrap_angle
 from swarmloc.world.laser.world import WORLD_STREAM, LaserWorld, LaserWorldConfig
@@ -161,17 +161,17 @@ def default_algorithms() -> AlgorithmRegistry:
     """The four localizers of issue 4."""
     registry = AlgorithmRegistry()
     registry.register(AlgorithmEntry(
-        "ssga", "MR-SSGA", "swarmloc.agents.ssga:SSGALocalizer",
-        "swarmloc.agents.ssga:SSGAParams", ("population_size",)))
+        "ssga", "MR-SSGA", "swarmloc.agents.laser.ssga:SSGALocalizer",
+        "swarmloc.agents.laser.ssga:SSGAParams", ("population_size",)))
     registry.register(AlgorithmEntry(
-        "simple_ga", "simple GA", "swarmloc.agents.simple_ga:SimpleGALocalizer",
-        "swarmloc.agents.simple_ga:SimpleGAParams", ("population_size",)))
+        "simple_ga", "simple GA", "swarmloc.agents.laser.simple_ga:SimpleGALocalizer",
+        "swarmloc.agents.laser.simple_ga:SimpleGAParams", ("population_size",)))
     registry.register(AlgorithmEntry(
-        "cfsga", "CFS-GA", "swarmloc.agents.cfsga:CFSGALocalizer",
-        "swarmloc.agents.cfsga:CFSGAParams", ("population_size",)))
+        "cfsga", "CFS-GA", "swarmloc.agents.laser.cfsga:CFSGALocalizer",
+        "swarmloc.agents.laser.cfsga:CFSGAParams", ("population_size",)))
     registry.register(AlgorithmEntry(
-        "amcl", "AMCL", "swarmloc.agents.amcl:AMCLLocalizer",
-        "swarmloc.agents.amcl:AMCLParams", ("min_particles", "max_particles")))
+        "amcl", "AMCL", "swarmloc.agents.laser.amcl:AMCLLocalizer",
+        "swarmloc.agents.laser.amcl:AMCLParams", ("min_particles", "max_particles")))
     return registry
 
 

@@ -1,7 +1,7 @@
 """Evaluation on MRCLAM data: run one configuration on one data set in-process, score it.
 
 ``run_replay(dataset, config)`` builds one localizer per robot
-(:func:`swarmloc.agents.mrclam_localizers.build_localizer`), drives them with the replay world
+(:func:`swarmloc.agents.replay.localizers.build_localizer`), drives them with the replay world
 (:class:`swarmloc.world.replay.replay.ReplayWorld`) in lockstep, and returns every estimate with the
 ground truth at the same instants. :func:`score` gives per robot the position RMSE
 ``sqrt(mean |p_est - p_true|^2)`` and heading RMSE ``sqrt(mean wrap(theta_est - theta_true)^2)``
@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from swarmloc.agents.mrclam_localizers import (
+from swarmloc.agents.replay.localizers import (
     ALGORITHMS,
     CameraNoise,
     LandmarkSetup,

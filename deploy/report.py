@@ -401,7 +401,7 @@ def describe_seeds(rows: Sequence[dict]) -> str:
 
 
 def _is_fermi(strategy: str | None) -> bool:
-    from swarmloc.agents.social_odometry import STRATEGIES
+    from swarmloc.agents.epuck.social_odometry import STRATEGIES
 
     known = STRATEGIES.get(strategy or "")
     return known.gain == "fermi" if known is not None else bool(strategy) and "FF" in strategy

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 
-from swarmloc.agents.foraging import AgentConfig
+from swarmloc.agents.epuck.foraging import AgentConfig
 from swarmloc.config import ConfigError, apply_overrides, from_dict, load_toml, to_dict
 from swarmloc.world.epuck.foraging import WorldConfig
 

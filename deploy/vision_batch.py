@@ -20,7 +20,7 @@ robot sees what the paper says it sees at the start (a noise-free frame, the age
 detection). Left/right and variant a/b of the paper's figures are drawn at random.
 
 :func:`run_vision` runs one seed: :class:`~swarmloc.world.vision.world.VisionWorld` and one
-:class:`~swarmloc.agents.vision_agent.VisionBrain` per robot (generator ``[seed, 1, id]``), in
+:class:`~swarmloc.agents.vision.brain.VisionBrain` per robot (generator ``[seed, 1, id]``), in
 lockstep; shared detections travel as the same bytes payloads an agent process would publish on
 ``swarmloc/<run>/team/<team>/blobs/<id>``, through :class:`TeamChannel` (emitted at tick k,
 delivered at k+1). An image or a payload that a brain rejects (``ValueError``) is counted and the
@@ -53,8 +53,8 @@ from pathlib import Path
 
 import numpy as np
 
-from swarmloc.agents.vision import detect_blobs
-from swarmloc.agents.vision_agent import (
+from swarmloc.agents.vision.detection import detect_blobs
+from swarmloc.agents.vision.brain import (
     VisionAgentConfig,
     VisionBrain,
     decode_image,

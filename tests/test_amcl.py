@@ -1,4 +1,4 @@
-"""Tests of the AMCL-style particle filter (agents/amcl.py; baseline of seeds 002 and 003).
+"""Tests of the AMCL-style particle filter (agents/laser/amcl.py; baseline of seeds 002 and 003).
 
 Expected values come from closed forms computed here independently (scipy's chi-square and normal
 quantiles, hand geometry on a box map, the Augmented_MCL averages by hand), statistics have stated
@@ -17,7 +17,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.stats import chi2, norm, vonmises
 
-from swarmloc.agents.amcl import (
+from swarmloc.agents.laser.amcl import (
     MAX_SHARED_SAMPLES,
     AMCLLocalizer,
     AMCLParams,
@@ -35,7 +35,7 @@ from swarmloc.agents.amcl import (
     recovery_probability,
     teammate_log_factor,
 )
-from swarmloc.agents.localizer import (
+from swarmloc.agents.laser.localizer import (
     MAX_RADIO_PAYLOAD_BYTES,
     LaserObservation,
     Localizer,

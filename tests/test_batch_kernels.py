@@ -1,4 +1,4 @@
-"""Tests of the compiled kernels behind the batch engine (world/epuck/kernels.py, agents/kernels.py).
+"""Tests of the compiled kernels behind the batch engine (world/epuck/kernels.py, agents/epuck/kernels.py).
 
 The kernels must give exactly what the models specify, whatever the swarm's layout: their
 neighbour search is checked against brute force, the collision kernel against the KD-tree version
@@ -23,9 +23,9 @@ import pytest
 from numba import njit
 
 from swarmloc import numerics
-from swarmloc.agents import kernels as agent_kernels
-from swarmloc.agents.foraging import AgentConfig, ForagingBrain, Inbox, SocialMessages, agent_rng
-from swarmloc.agents.social_odometry import sgiff_update
+from swarmloc.agents.epuck import kernels as agent_kernels
+from swarmloc.agents.epuck.foraging import AgentConfig, ForagingBrain, Inbox, SocialMessages, agent_rng
+from swarmloc.agents.epuck.social_odometry import sgiff_update
 from swarmloc.deploy.batch import CompiledTicks, inbox_from, run_ticks, swarm_brain
 from swarmloc.deploy.scenario import load_scenario
 from swarmloc.protocol.epuck import (

@@ -14,7 +14,7 @@ import msgpack
 import numpy as np
 import pytest
 
-from swarmloc.agents.foraging import (
+from swarmloc.agents.epuck.foraging import (
     KNOWS_BOTH,
     NEST,
     PREY,

@@ -1,4 +1,4 @@
-"""Tests of CFS-GA (agents/cfsga.py; seed 003 §III-B, §IV, table I).
+"""Tests of CFS-GA (agents/laser/cfsga.py; seed 003 §III-B, §IV, table I).
 
 Operators against hand-computed values and exact geometry; the payload codec against malformed
 input; the whole localizer on maps of world/laser/maps.py, driven by the laser world models of
@@ -15,7 +15,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from swarmloc.agents.cfsga import (
+from swarmloc.agents.laser.cfsga import (
     MAX_SHARED_INDIVIDUALS,
     CFSGALocalizer,
     CFSGAParams,
@@ -31,7 +31,7 @@ from swarmloc.agents.cfsga import (
     tournament_select,
     virtual_population,
 )
-from swarmloc.agents.localizer import (
+from swarmloc.agents.laser.localizer import (
     MAX_RADIO_PAYLOAD_BYTES,
     LaserObservation,
     Localizer,

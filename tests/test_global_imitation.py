@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from swarmloc.agents.global_imitation import (
+from swarmloc.agents.epuck.global_imitation import (
     imitate_globally,
     to_arena_frame,
     to_robot_frames,
@@ -117,7 +117,7 @@ def test_in_the_batch_engine_every_robot_holds_the_same_arena_point_each_tick():
     sc = load_scenario("SO-3.0x3.0", ["world.robots=12", "agent.strategy=GLOBAL", "world.duration_s=400.0",
                                       "world.seed=4"])
     world, brain = ForagingWorld(sc.world), swarm_brain(sc)
-    from swarmloc.agents.foraging import on_path
+    from swarmloc.agents.epuck.foraging import on_path
     from swarmloc.deploy.batch import inbox_from
 
     sent, checked = None, 0

@@ -16,7 +16,7 @@ import textwrap
 import numpy as np
 import pytest
 
-from swarmloc.agents.localizer import LaserObservation, LocalizerSetup
+from swarmloc.agents.laser.localizer import LaserObservation, LocalizerSetup
 from swarmloc.config import ConfigError
 from swarmloc.deploy.experiment import load_spec, plan
 from swarmloc.deploy.laser_batch import (

@@ -17,8 +17,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from swarmloc.agents.ekf import EkfLocalizer, position_update, range_bearing_update
-from swarmloc.agents.mrclam_localizers import (
+from swarmloc.agents.replay.ekf import EkfLocalizer, position_update, range_bearing_update
+from swarmloc.agents.replay.localizers import (
     CameraNoise,
     LandmarkSetup,
     MotionNoise,

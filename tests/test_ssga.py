@@ -1,4 +1,4 @@
-"""Tests of MR-SSGA and the simple GA (agents/ssga.py, agents/simple_ga.py; seed 002).
+"""Tests of MR-SSGA and the simple GA (agents/laser/ssga.py, agents/laser/simple_ga.py; seed 002).
 
 Networks against the counts the Watts-Strogatz and Barabási-Albert constructions fix; the mating
 rules of table 1 on hand-built tiny networks; eq. 1 and eq. 2 against ranges computed by hand in
@@ -17,7 +17,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from swarmloc.agents.localizer import (
+from swarmloc.agents.laser.localizer import (
     MAX_RADIO_PAYLOAD_BYTES,
     LaserObservation,
     Localizer,
@@ -25,14 +25,14 @@ from swarmloc.agents.localizer import (
     RadioMessage,
     Sighting,
 )
-from swarmloc.agents.simple_ga import (
+from swarmloc.agents.laser.simple_ga import (
     SimpleGALocalizer,
     SimpleGAParams,
     roulette_selection,
     simple_ga_reproduction,
     tournament_selection,
 )
-from swarmloc.agents.ssga import (
+from swarmloc.agents.laser.ssga import (
     FitnessModel,
     GeneticParams,
     SSGALocalizer,

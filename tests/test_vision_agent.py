@@ -1,4 +1,4 @@
-"""The vision brain (agents/vision_agent.py) and the in-process runner (deploy/vision_batch.py),
+"""The vision brain (agents/vision/brain.py) and the in-process runner (deploy/vision_batch.py),
 seed 004 §II-IV.
 
 Expected values come from the geometry of the placed robots and objects (plain trigonometry in
@@ -19,8 +19,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from swarmloc.agents.cooperative_vision import Detection
-from swarmloc.agents.vision_agent import (
+from swarmloc.agents.vision.cooperative import Detection
+from swarmloc.agents.vision.brain import (
     MAX_SHARE_BYTES,
     SharedFrame,
     VisionAgentConfig,

@@ -13,7 +13,7 @@ import cv2
 import numpy as np
 import pytest
 
-from swarmloc.agents.vision import detect_blobs
+from swarmloc.agents.vision.detection import detect_blobs
 from swarmloc.world.vision.camera import CameraParams
 from swarmloc.world.vision.world import (
     CONTACT_MARGIN_M,

@@ -15,8 +15,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import optimize, stats
 
-from swarmloc.agents.foraging import NEST, PREY
-from swarmloc.agents.foraging import classify_ground as agent_classify_ground
+from swarmloc.agents.epuck.foraging import NEST, PREY
+from swarmloc.agents.epuck.foraging import classify_ground as agent_classify_ground
 from swarmloc.protocol.epuck import GROUND_SENSOR_OFFSETS_M, IR_SENSOR_ANGLES_RAD
 from swarmloc.world.epuck.arena import (
     AREA_NEST,

@@ -12,7 +12,7 @@ from ``swarmloc.protocol.epuck``.
 - :func:`ground_sensors`: floor reflectance (``world/epuck/arena.py``) under each ground sensor, times
   ``1 + U(-f, f)``.
   What a robot concludes from the readings is the agent's business
-  (``swarmloc.agents.foraging.classify_ground``).
+  (``swarmloc.agents.epuck.foraging.classify_ground``).
 
 Random draws (fixed order, so a run is deterministic given ``rng``): :func:`ir_proximity` makes one
 ``rng.uniform(-f, f, size=(N, 8))`` call; :func:`ground_sensors` one

@@ -101,7 +101,7 @@ class ForagingService:
 
 
 def _foraging(scenario) -> ForagingService:
-    from swarmloc.agents.social_odometry import STRATEGIES
+    from swarmloc.agents.epuck.social_odometry import STRATEGIES
     from swarmloc.world.epuck.foraging import ForagingWorld
 
     if STRATEGIES[scenario.agent.strategy].central:

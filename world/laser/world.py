@@ -8,7 +8,7 @@ world-server: it never touches a transport, a clock or global random state.
 
 Per step ``k`` (lockstep):
 
-1. :meth:`LaserWorld.observe` gives every robot its :class:`~swarmloc.agents.localizer.LaserObservation`
+1. :meth:`LaserWorld.observe` gives every robot its :class:`~swarmloc.agents.laser.localizer.LaserObservation`
    at the current true poses: the odometry of the last move (the *commanded* increments, eq. 3
    of 002: the true robot moved by noisy ones), its laser scan (eq. 4 of 002 + Gaussian noise,
    :func:`~swarmloc.world.laser.laser.scan`), the teammates it sees (noisy distance, bearing and
@@ -64,7 +64,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import cKDTree
 
-from swarmloc.agents.localizer import (
+from swarmloc.agents.laser.localizer import (
     MAX_RADIO_PAYLOAD_BYTES,
     LaserObservation,
     LocalizerSetup,

@@ -45,7 +45,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from swarmloc.agents.localizer import RadioMessage
+from swarmloc.agents.laser.localizer import RadioMessage
 from swarmloc.protocol.messages import MAX_RADIO_PAYLOAD_BYTES
 from swarmloc.world.replay.mrclam import MrclamDataset, RobotRecord
 

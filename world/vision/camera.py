@@ -30,7 +30,7 @@ brightness gain for the frame (lighting variation), then, if ``noise_sigma > 0``
 noise of ``noise_sigma`` grey levels. Output ``round(clip(gain * image + noise, 0, 255))``.
 
 The object kinds, their colours (:data:`COLOURS_BGR`) and nominal sizes (:data:`OBJECT_KINDS`)
-are the physical contract that the detector in ``swarmloc.agents.vision`` relies on; a test checks
+are the physical contract that the detector in ``swarmloc.agents.vision.detection`` relies on; a test checks
 that the two agree.
 """
 

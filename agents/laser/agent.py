@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from swarmloc.agents.brains import BrainError
-from swarmloc.agents.localizer import LaserObservation, LocalizerSetup, RadioMessage, Sighting
+from swarmloc.agents.laser.localizer import LaserObservation, LocalizerSetup, RadioMessage, Sighting
 from swarmloc.protocol.errors import ErrorCounter
 from swarmloc.protocol.messages import EstimateAct, LaserSense, Welcome
 
@@ -26,7 +26,7 @@ class LaserAgent:
 
     @classmethod
     def from_welcome(cls, welcome: Welcome, scenario) -> LaserAgent:
-        from swarmloc.agents.foraging import agent_rng
+        from swarmloc.agents.epuck.foraging import agent_rng
         from swarmloc.deploy.laser_batch import ALGORITHMS
 
         config, algo = scenario.world, scenario.algorithm

@@ -1,6 +1,6 @@
-"""Compiled (numba) kernels of the foraging brain (``agents/foraging.py``), over a batch of robots.
+"""Compiled (numba) kernels of the foraging brain (``agents/epuck/foraging.py``), over a batch of robots.
 
-:class:`swarmloc.agents.foraging.ForagingBrain` calls them, so an agent process (a batch of one)
+:class:`swarmloc.agents.epuck.foraging.ForagingBrain` calls them, so an agent process (a batch of one)
 and the batch engine (the whole swarm) run exactly this code. Each kernel evaluates the same
 floating-point expressions, in the same order, as the numpy formulation it replaced, so seeded
 runs are bit-identical to it (``benchmarks/fingerprint.py``):

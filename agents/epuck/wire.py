@@ -25,7 +25,7 @@ import msgpack
 import numpy as np
 from numba import njit
 
-from swarmloc.agents.social_codec import (
+from swarmloc.agents.epuck.social_codec import (
     _bits_of_f64,
     _f64_from_bits,
     _get_be,
@@ -65,7 +65,7 @@ _ACT_TAG, _ACT = _FIELD_SPECS[EpuckAct]
 
 def _require(condition: bool, what: str) -> None:
     if not condition:
-        raise RuntimeError(f"protocol/messages.py changed: {what}; update agents/epuck_wire.py")
+        raise RuntimeError(f"protocol/messages.py changed: {what}; update agents/epuck/wire.py")
 
 
 _require(tuple(_SENSE) == ("tick", "robot_id", "encoder_steps", "ir", "ground", "received", "final"),

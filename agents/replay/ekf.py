@@ -5,8 +5,8 @@ State: the pose ``(x_m, y_m, theta_rad)`` and its covariance ``P`` (3 x 3).
 - **Predict** (each tick): the unicycle of seed 000 eq. 7 driven by the tick's mean command
   ``(v, omega, dt)``; ``P <- A P A^T + W Q W^T`` (seed 000 eq. 9, with ``A`` the Jacobian of
   eq. 11 and ``W`` the one with respect to the travelled distance and turn; ``Q`` from
-  :class:`~swarmloc.agents.mrclam_localizers.MotionNoise`), see
-  :func:`~swarmloc.agents.mrclam_localizers.propagate`.
+  :class:`~swarmloc.agents.replay.localizers.MotionNoise`), see
+  :func:`~swarmloc.agents.replay.localizers.propagate`.
 - **Landmark update** (:func:`range_bearing_update`): the readings of one tick stacked into one
   update, ``h(x) = (|l - p|, atan2(l_y - y, l_x - x) - theta)`` with ``H`` its Jacobian,
   ``S = H P H^T + R``, ``K = P H^T S^-1``, Joseph-form covariance update (Probabilistic Robotics
@@ -15,9 +15,9 @@ State: the pose ``(x_m, y_m, theta_rad)`` and its covariance ``P`` (3 x 3).
   degrees of freedom; default 99.9 %) is discarded as an outlier (MRCLAM has misread barcodes and
   about 2 % of ranges off by more than 0.5 m).
 - **Cooperative** (``setup.cooperative``): each robot broadcasts a
-  :class:`~swarmloc.agents.mrclam_localizers.TeammateReport` (pose, covariance, the teammates it
+  :class:`~swarmloc.agents.replay.localizers.TeammateReport` (pose, covariance, the teammates it
   measured). With ``fusion="relative"`` a reading between this robot and teammate ``j``
-  (:func:`~swarmloc.agents.mrclam_localizers.relative_readings`, at most one per teammate and
+  (:func:`~swarmloc.agents.replay.localizers.relative_readings`, at most one per teammate and
   tick) is an EKF update in which the teammate's position is an uncertain landmark:
   ``S = H P H^T + H_j P_j H_j^T + R`` (this robot measured ``j``), or, when ``j`` measured this
   robot, a position fix ``p_j + r (cos, sin)(theta_j + b)`` with covariance through ``P_j``
@@ -28,7 +28,7 @@ State: the pose ``(x_m, y_m, theta_rad)`` and its covariance ``P`` (3 x 3).
   robot helps the worse, never the other way round, which keeps the exchange from feeding a
   robot's own information back to it). With ``fusion="sgikf"`` the reading becomes a position fix
   fused by social odometry's SGIKF (seed 000 eq. 18-22,
-  :func:`~swarmloc.agents.mrclam_localizers.sgikf_fuse`).
+  :func:`~swarmloc.agents.replay.localizers.sgikf_fuse`).
 
 Pure: no clock, no randomness (the EKF draws nothing; the generator is accepted for the common
 builder signature).
@@ -40,7 +40,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from swarmloc.agents.mrclam_localizers import (
+from swarmloc.agents.replay.localizers import (
     LandmarkSetup,
     TeammateReport,
     _real,
@@ -145,7 +145,7 @@ def position_update(pose: np.ndarray, cov: np.ndarray, fix_xy: np.ndarray, fix_c
 
 class EkfLocalizer:
     """EKF with known landmarks for one robot (a
-    :class:`~swarmloc.agents.mrclam_localizers.LandmarkLocalizer`)."""
+    :class:`~swarmloc.agents.replay.localizers.LandmarkLocalizer`)."""
 
     def __init__(self, setup: LandmarkSetup, params: EkfParams | None = None,
                  rng: np.random.Generator | None = None):

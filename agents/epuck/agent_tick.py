@@ -1,8 +1,8 @@
 """One e-puck agent's whole tick in one compiled call: the foraging brain with its state packed.
 
-An agent process steps a :class:`~swarmloc.agents.foraging.ForagingBrain` of one robot. Through
+An agent process steps a :class:`~swarmloc.agents.epuck.foraging.ForagingBrain` of one robot. Through
 ``ForagingBrain.step`` a tick is some thirty numpy and Python operations around the compiled
-:func:`~swarmloc.agents.kernels.brain_tick`, whose 58 array arguments numba checks and unboxes one
+:func:`~swarmloc.agents.epuck.kernels.brain_tick`, whose 58 array arguments numba checks and unboxes one
 by one. Warm, that is 26 µs; in a swarm of 100 processes taking turns on 2 cores every tick starts
 with cold caches, and the same tick costs about 180 µs: most of an agent's CPU beyond the bare
 transport (issue 2's tick-rate target).
@@ -18,7 +18,7 @@ the robot's own payload. The numbers are ``ForagingBrain.step``'s, bit for bit: 
 It covers what an agent runs in practice: strategies whose confidence is the distance travelled
 (all but SSIKF and DSIKF, whose covariance odometry is numpy code outside the kernel), with the
 brain's own motor layers. :meth:`PackedForagingTick.supports` says whether a brain qualifies;
-the agent shell (agents/brains.py: ForagingAgent) falls back to ``ForagingBrain.step`` otherwise.
+the agent shell (agents/epuck/agent.py: ForagingAgent) falls back to ``ForagingBrain.step`` otherwise.
 """
 
 from __future__ import annotations
@@ -26,10 +26,10 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from swarmloc.agents import kernels
-from swarmloc.agents.epuck_wire import N_PERCEPTS, encode_act, parse_sense
-from swarmloc.agents.foraging import _COS_IR, _SIN_IR
-from swarmloc.agents.social_codec import decode_payload, encode_payload
+from swarmloc.agents.epuck import kernels
+from swarmloc.agents.epuck.wire import N_PERCEPTS, encode_act, parse_sense
+from swarmloc.agents.epuck.foraging import _COS_IR, _SIN_IR
+from swarmloc.agents.epuck.social_codec import decode_payload, encode_payload
 
 #: Header slots of the int buffer: robots, heard capacity, encounter memory, inbox capacity, the
 #: tick count, how many payloads the last tick rejected, how many messages it received, the
@@ -260,9 +260,9 @@ def agent_tick(f, i, b, blob, n_messages, payload_out):
 
 @njit(cache=True, error_model="numpy")
 def agent_tick_wire(f, i, b, sense, payload_out, act_out):
-    """One tick from the Sense's bytes to the Act's: :func:`.epuck_wire.parse_sense` (the
+    """One tick from the Sense's bytes to the Act's: :func:`.wire.parse_sense` (the
     world-server's canonical form only; else ``WIRE_USE_CODEC``, nothing done), :func:`_tick`,
-    then :func:`.epuck_wire.encode_act` into ``act_out``. Returns the Act's length, or
+    then :func:`.wire.encode_act` into ``act_out``. Returns the Act's length, or
     ``WIRE_ACT_INVALID`` if the payload or the Act does not encode."""
     fv, iv, _, _ = _views(f, i, b)
     header, robot_ids, msg_sender_len, msg_start = iv[I_HEADER], iv[I_ROBOT_IDS], iv[I_SENDER_LEN], iv[I_START]
@@ -298,7 +298,7 @@ def _load_kernel(brain) -> None:
 
 
 class PackedForagingTick:
-    """A one-robot :class:`~swarmloc.agents.foraging.ForagingBrain`, moved into packed buffers and
+    """A one-robot :class:`~swarmloc.agents.epuck.foraging.ForagingBrain`, moved into packed buffers and
     stepped by :func:`agent_tick`. The brain's arrays are copied at construction; the brain
     itself must not be stepped afterwards (its generator, which the kernel draws from, must live:
     the caller keeps the brain)."""

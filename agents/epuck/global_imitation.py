@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from swarmloc.agents.social_odometry import transform_received
+from swarmloc.agents.epuck.social_odometry import transform_received
 
 
 def _rotate(xy: np.ndarray, angle_rad: np.ndarray) -> np.ndarray:
@@ -155,7 +155,7 @@ def central_rng(seed: int) -> np.random.Generator:
 
 
 def imitate_brain(brain, true_pose: np.ndarray, rng: np.random.Generator, medium) -> None:
-    """:func:`imitate_globally` on a :class:`~swarmloc.agents.foraging.ForagingBrain` holding the
+    """:func:`imitate_globally` on a :class:`~swarmloc.agents.epuck.foraging.ForagingBrain` holding the
     whole swarm, given the robots' true poses (the world's ``pose``); with its strategy's
     ``central == "boards"``, the transfer has the noise of the range-and-bearing ``medium``
     (``world.medium.RabMedium``)."""

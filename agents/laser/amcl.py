@@ -30,7 +30,7 @@ One step (:meth:`AugmentedMCL.update`, driven by :meth:`AMCLLocalizer.step`):
    ``w_fast += alpha_fast (w_avg - w_fast)`` (kept in the log domain: exact, and safe for any
    scale of likelihood); the injection probability is ``max(0, 1 - w_fast / w_slow)``.
 4. **Teammates** (the collaborative variant, Fox, Burgard, Kruppa, Thrun 2000, ref. [5] of 002 and
-   [6] of 003): a robot that *sees* a teammate (a :class:`~swarmloc.agents.localizer.Sighting`:
+   [6] of 003): a robot that *sees* a teammate (a :class:`~swarmloc.agents.laser.localizer.Sighting`:
    distance, bearing, relative heading) and has its broadcast belief summary (a small set of
    weighted pose samples with a kernel, :class:`BeliefSummary`) multiplies each particle's
    weight by the density of the teammate's belief at the pose that particle predicts for the
@@ -82,7 +82,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.special import i0e, logsumexp
 
-from swarmloc.agents.localizer import (
+from swarmloc.agents.laser.localizer import (
     MAX_RADIO_PAYLOAD_BYTES,
     LaserObservation,
     LocalizerSetup,
@@ -1105,7 +1105,7 @@ def _check_setup(setup: LocalizerSetup) -> None:
 
 
 class AMCLLocalizer:
-    """The AMCL-style particle filter as a :class:`~swarmloc.agents.localizer.Localizer`.
+    """The AMCL-style particle filter as a :class:`~swarmloc.agents.laser.localizer.Localizer`.
 
     ``AMCLLocalizer(setup, params, rng)``: the map comes from ``setup.map_name`` (or
     ``world_map``), the laser from ``setup``; ``setup.cooperative`` turns on the collaborative

@@ -19,7 +19,7 @@ comparison, where robots know their odometry error model.
 GLOBAL and GLOBAL_RB are seed 001's global imitation, by the two means the paper names: no
 messages over the 15 cm medium; each tick every robot takes the mean of the whole group's
 estimates, carried exactly by a central system (GLOBAL) or by long-range boards with the medium's
-range and bearing noise (GLOBAL_RB) (:mod:`swarmloc.agents.global_imitation`).
+range and bearing noise (GLOBAL_RB) (:mod:`swarmloc.agents.epuck.global_imitation`).
 
 The neighbour's estimate arrives in the neighbour's body frame; :func:`transform_received` turns it
 into the receiver's body frame from the range and the two bearings (eq. 27).
@@ -47,7 +47,7 @@ class Strategy:
     #: SGI filters), or "covariance": the spectral norm of the odometry covariance propagated
     #: with eq. 9-11 (eq. 19, the SIKF; seed 001's "covariance knowledge").
     confidence: str = "distance"
-    #: Seed 001's global imitation (:mod:`swarmloc.agents.global_imitation`): every robot takes
+    #: Seed 001's global imitation (:mod:`swarmloc.agents.epuck.global_imitation`): every robot takes
     #: the mean of the whole group's estimates each tick, shared by a central system that knows
     #: every robot's true pose ("system": exact transfer) or by range-and-bearing boards of
     #: unlimited range with the medium's noise ("boards"). Only the batch engine's world has the

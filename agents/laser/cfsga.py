@@ -92,7 +92,7 @@ or maps. It takes
 - a ``sample_poses(n, rng) -> (n, 3)`` callable for the random individuals and the initial
   population (:func:`map_sampler` for a map, :func:`box_sampler` for a bare rectangle).
 
-:class:`CFSGALocalizer` is the :class:`~swarmloc.agents.localizer.Localizer` that wires the core to
+:class:`CFSGALocalizer` is the :class:`~swarmloc.agents.laser.localizer.Localizer` that wires the core to
 the laser robots: ``CFSGALocalizer(setup, params, rng)`` or
 ``CFSGALocalizer.from_config(setup, {...}, rng)``.
 
@@ -119,7 +119,7 @@ from dataclasses import dataclass, fields
 import msgpack
 import numpy as np
 
-from swarmloc.agents.localizer import (
+from swarmloc.agents.laser.localizer import (
     MAX_RADIO_PAYLOAD_BYTES,
     LaserObservation,
     LocalizerSetup,
@@ -808,7 +808,7 @@ class FitnessSharingGA:
 
 
 class CFSGALocalizer:
-    """CFS-GA for one laser robot (:class:`~swarmloc.agents.localizer.Localizer`).
+    """CFS-GA for one laser robot (:class:`~swarmloc.agents.laser.localizer.Localizer`).
 
     ``fitness_model`` (default :class:`LaserFitness` on the setup's map and laser) turns each
     observation into the step's raw fitness; ``sample_poses`` (default: the map's free space)

@@ -16,7 +16,7 @@ Seed ``/work/shared/seeds/002_fe2ac635ba0eab3e.txt`` (Gasparri, Panzieri, Pascuc
   the difference between the measured range and the range expected at the hypothesis (eq. 4,
   :func:`swarmloc.world.laser.laser.cast_rays`).
 - **Collaborative fitness eq. 2** (:meth:`FitnessModel.team_fitness`): for every teammate ``s``
-  this robot both sees (:class:`~swarmloc.agents.localizer.Sighting`: distance, bearing, relative
+  this robot both sees (:class:`~swarmloc.agents.laser.localizer.Sighting`: distance, bearing, relative
   heading) and hears (its scan, sent by :meth:`SSGALocalizer.outgoing`), the teammate's pose is
   replicated around hypothesis ``i`` from the relative measurement, and eq. 1 of the teammate's
   scan at that replicated pose is added. A teammate heard but not seen cannot enter eq. 2
@@ -82,7 +82,7 @@ The radio payload (:func:`encode_scan_payload`, :func:`decode_scan_payload`) is 
 as little-endian float32 (beam ``j`` at the sender's heading plus ``j * 2 pi / L``); 8 beams make
 84 bytes. Decoding is strict and raises ``ValueError`` naming the bad field.
 
-The simple GA baseline of table 3 (``swarmloc.agents.simple_ga``) shares :class:`FitnessModel`,
+The simple GA baseline of table 3 (``swarmloc.agents.laser.simple_ga``) shares :class:`FitnessModel`,
 the kinematic update, the collaboration and the codec through :class:`GeneticLocalizer`.
 
 Random draws (fixed order, so a run is deterministic given the generator): network construction
@@ -101,7 +101,7 @@ import msgpack
 import networkx as nx
 import numpy as np
 
-from swarmloc.agents.localizer import (
+from swarmloc.agents.laser.localizer import (
     MAX_RADIO_PAYLOAD_BYTES,
     LaserObservation,
     LocalizerSetup,
@@ -202,7 +202,7 @@ class GeneticParams:
 @dataclass(frozen=True)
 class SSGAParams(GeneticParams):
     """MR-SSGA parameters. Table 2 of 002 fixes the sensors and noises (they come in
-    :class:`~swarmloc.agents.localizer.LocalizerSetup`); the network's parameters are not given
+    :class:`~swarmloc.agents.laser.localizer.LocalizerSetup`); the network's parameters are not given
     (fig. 1 shows both models with 30 nodes), so these are ordinary choices: Watts-Strogatz ring of
     ``ws_neighbours`` nearest neighbours rewired with probability ``ws_rewire_prob``;
     Barabási-Albert attaching each new node with ``ba_edges`` links."""

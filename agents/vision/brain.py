@@ -9,8 +9,8 @@ state) that runs inside an agent process or inside the in-process runner
 1. **Image** (§III, colour events): the encoded camera frame is decoded (:func:`decode_image`: a
    payload that does not decode, or decodes to the wrong size, raises ``ValueError`` naming the
    problem before any state changes; the shell counts it and goes on) and its colour blobs are
-   found with ``swarmloc.agents.vision.detect_blobs`` (HSV thresholds, morphology, components).
-   Each blob becomes a :class:`~swarmloc.agents.cooperative_vision.Detection`: colour, bearing in
+   found with ``swarmloc.agents.vision.detection.detect_blobs`` (HSV thresholds, morphology, components).
+   Each blob becomes a :class:`~swarmloc.agents.vision.cooperative.Detection`: colour, bearing in
    the body frame (head pan + angle off the optical axis), apparent size and size-based distance.
    Cylinders cut by the left or right image edge are dropped (their width, hence distance and
    bearing, are wrong); a ball cut by the image edge keeps the larger of its equal-area radius and
@@ -21,14 +21,14 @@ state) that runs inside an agent process or inside the in-process runner
    :func:`decode_share`, which rejects impossible values with ``ValueError`` naming the field:
    NaN or infinite numbers, a negative or zero size or distance, a bearing outside the camera's
    field of view, a time in the future, a sender that is not who it claims to be, an unknown
-   colour. Detections older than the window (2 s, §III) are dropped (``cooperative_vision.fresh``).
+   colour. Detections older than the window (2 s, §III) are dropped (``cooperative.fresh``).
 3. **Cooperative localization** (§II, eq. 1 and 2): a teammate's frame is paired with my own
    frame of the same time; for each colour both see exactly once (ball, obstacle, beacon) the
    teammate's position in my body frame follows by stereo (eq. 1,
-   ``cooperative_vision.stereo_relative_position``), or by the law of cosines (eq. 2,
+   ``cooperative.stereo_relative_position``), or by the law of cosines (eq. 2,
    ``teammate_from_common_object``) where stereo has no disparity; a direct sighting of the
    teammate (a yellow blob, monocular size-based distance) is one more estimate; the estimates
-   are checked against each other and fused (``cooperative_vision.fuse``: a minority that
+   are checked against each other and fused (``cooperative.fuse``: a minority that
    disagrees by more than ``consistency_tolerance_m`` is rejected, a contradictory set gives
    nothing). Objects I cannot see are placed from what a teammate sees (eq. 2,
    ``object_from_teammate``: Fig. 3, experiment 3).
@@ -44,7 +44,7 @@ With sharing off the robot uses only what it sees: a teammate is known only whil
 Choices where the paper is silent
 ---------------------------------
 - **Relative heading.** One common object fixes a teammate's position only when the two robots'
-  headings are related (see ``cooperative_vision``). The robots start with known relative heading
+  headings are related (see ``cooperative``). The robots start with known relative heading
   ``initial_relative_heading_rad`` (0: side by side and parallel, as in §IV's set-ups) and share
   their odometry, so ``psi(t) = psi0 + theta_teammate_odo(t) - theta_mine_odo(t)``
   (``relative_heading = "odometry"``, the default). With ``"objects"``, two objects seen in
@@ -79,7 +79,7 @@ import cv2
 import msgpack
 import numpy as np
 
-from swarmloc.agents.cooperative_vision import (
+from swarmloc.agents.vision.cooperative import (
     FRESH_WINDOW_S,
     Detection,
     fresh,
@@ -90,14 +90,14 @@ from swarmloc.agents.cooperative_vision import (
     teammate_from_common_object,
     wrap_rad,
 )
-from swarmloc.agents.potential_field import (
+from swarmloc.agents.vision.potential_field import (
     BALL,
     OBSTACLE,
     FieldParams,
     assign_goals,
     potential_field,
 )
-from swarmloc.agents.vision import COLOUR_CLASSES, detect_blobs
+from swarmloc.agents.vision.detection import COLOUR_CLASSES, detect_blobs
 from swarmloc.world.vision.camera import OBJECT_KINDS, CameraParams
 from swarmloc.world.vision.world import VisionCommand, VisionObservation
 

@@ -15,9 +15,9 @@ robot's odometric frame; ``p`` (inverse confidence, eq. 23) is the distance trav
 robot last left the area, in metres.
 
 Everything is over a batch of robots, so one agent process runs a batch of one and the batch
-engine the whole swarm (an agent process steps its batch of one through ``agents/agent_tick.py``:
+engine the whole swarm (an agent process steps its batch of one through ``agents/epuck/agent_tick.py``:
 the same kernel, its state packed, one compiled call per tick, the payloads coded in it). The
-layers run in compiled kernels (``agents/kernels.py``), the same for both, in one call per tick;
+layers run in compiled kernels (``agents/epuck/kernels.py``), the same for both, in one call per tick;
 they evaluate the equations of :mod:`.social_odometry` (whose numpy functions remain the readable
 reference, and the tests hold the kernels to them). Each robot owns its generator, derived from
 the run seed and its id; the kernel draws a robot's random walk from it, the numbers numpy would
@@ -35,8 +35,8 @@ import msgpack
 import numpy as np
 
 from swarmloc import numerics
-from swarmloc.agents import kernels
-from swarmloc.agents.social_odometry import STRATEGIES
+from swarmloc.agents.epuck import kernels
+from swarmloc.agents.epuck.social_odometry import STRATEGIES
 from swarmloc.protocol.epuck import (  # noqa: F401 -- on_path is part of this module's API
     GROUND_SENSOR_OFFSETS_M,
     IR_SENSOR_ANGLES_RAD,
@@ -353,7 +353,7 @@ class ForagingBrain:
         self._silent = SocialMessages.empty(n, k)  # what a robot that never sends "sends"
         self._sending = np.full(n, self.strategy.communicates)
         spin_rad_s = 2.0 * config.turn_speed_steps_s * body.metres_per_step / body.wheelbase_m
-        # Constants of the layers (agents/kernels.py: brain_tick). The random walk's
+        # Constants of the layers (agents/epuck/kernels.py: brain_tick). The random walk's
         # uniform((-pi, lo), (pi, hi)) as low + (high - low) * random(), how numpy computes it.
         lo, hi = config.wander_straight_s
         self._params = np.zeros(kernels.N_BRAIN_PARAMS)
@@ -384,7 +384,7 @@ class ForagingBrain:
         self._math = numerics.numpy_math()  # numpy's exp and arctan2, bit for bit
 
     # -- layers ------------------------------------------------------------------------------
-    # The work is done by the compiled kernels of agents/kernels.py, on the state arrays above,
+    # The work is done by the compiled kernels of agents/epuck/kernels.py, on the state arrays above,
     # in one call per tick (brain_tick), for a batch of one as for the whole swarm.
     #
     # *Odometry*: dead reckoning of the encoder counts (seed 000 eq. 7); ``p`` grows with the
@@ -427,7 +427,7 @@ class ForagingBrain:
             self._rng_address = (self.rngs, fn, state)
         return fn, state
 
-    # The pieces of a call of agents/kernels.py: brain_tick, in its argument order: also for the
+    # The pieces of a call of agents/epuck/kernels.py: brain_tick, in its argument order: also for the
     # batch engine's compiled tick (deploy/batch.py), which calls brain_tick from there.
 
     def _tick_state(self, new_pose: np.ndarray) -> tuple:
@@ -500,7 +500,7 @@ class ForagingBrain:
         self, encoder_steps: np.ndarray, ir: np.ndarray, ground: np.ndarray, inbox: Inbox
     ) -> BrainOutput:
         """One controller tick for every robot of the batch (10 Hz on the e-puck): the layers of
-        the module docstring, in one compiled call (agents/kernels.py: brain_tick)."""
+        the module docstring, in one compiled call (agents/epuck/kernels.py: brain_tick)."""
         encoder_steps = np.asarray(encoder_steps, float)
         new_pose = np.empty_like(self.pose)
         if self.goal_cov is not None:

@@ -1,6 +1,6 @@
 """Localizers for landmark range-and-bearing robots (the MRCLAM replay), and their contract.
 
-This mirrors the laser family's contract (``agents/localizer.py``) for the observations of
+This mirrors the laser family's contract (``agents/laser/localizer.py``) for the observations of
 :class:`swarmloc.world.replay.replay.LandmarkObservation`: one localizer object is one robot's brain, a
 pure model with its own ``numpy.random.Generator``, that the replay world feeds in-process or a
 world-server shell feeds over Zenoh:
@@ -18,16 +18,16 @@ Algorithms (registry :data:`ALGORITHMS`, built by :func:`build_localizer`):
   eq. 9 of seed 000 with the noise model of :class:`MotionNoise`); cooperative: **social
   odometry**, the SGIKF of seed 000 eq. 18-22 applied to pose estimates (see
   :func:`sgikf_fuse`), with the SIKF's covariance-norm confidence of eq. 19;
-- ``ekf``: the EKF with known landmarks (``agents/ekf.py``), the reference baseline of the MRCLAM
+- ``ekf``: the EKF with known landmarks (``agents/replay/ekf.py``), the reference baseline of the MRCLAM
   literature; cooperative: relative range-and-bearing updates against the teammates' broadcast
   estimates (or the SGIKF fusion, ``fusion="sgikf"``);
-- ``pf``: the AMCL-style particle filter of ``agents/amcl.py`` (:class:`AugmentedMCL`: KLD
+- ``pf``: the AMCL-style particle filter of ``agents/laser/amcl.py`` (:class:`AugmentedMCL`: KLD
   sampling, recovery) with the landmark log-likelihood :func:`landmark_log_likelihood` plugged
   in; cooperative: each particle is reweighted by the density of the teammate's broadcast
   belief (a Gaussian) at the place the particle and the relative measurement put it (Fox, Burgard,
   Kruppa, Thrun 2000, as in ``amcl.teammate_log_factor`` but without a relative heading, which
   MRCLAM's cameras do not measure);
-- ``cfsga``: CFS-GA of ``agents/cfsga.py`` (:class:`FitnessSharingGA`, seed 003) with the raw
+- ``cfsga``: CFS-GA of ``agents/laser/cfsga.py`` (:class:`FitnessSharingGA`, seed 003) with the raw
   fitness :func:`landmark_fitness_terms` (003 §IV-A's mean of Gaussians of the measurement
   residuals, over the landmark readings of the last second); cooperative: 003 §IV-B's virtual
   population and virtual niches, the teammates' above-average individuals turned into
@@ -64,7 +64,7 @@ from typing import Protocol, runtime_checkable
 import msgpack
 import numpy as np
 
-from swarmloc.agents.social_odometry import sgikf_update
+from swarmloc.agents.epuck.social_odometry import sgikf_update
 from swarmloc.world.replay.replay import MAX_PAYLOAD_BYTES, LandmarkObservation, Message
 
 TWO_PI = 2.0 * math.pi
@@ -625,7 +625,7 @@ def sgikf_fuse(pose: np.ndarray, cov: np.ndarray, fix_xy: np.ndarray, fix_cov: n
     ``g = p_i / (p_i + p_j)`` (eq. 20), ``x_i <- (1 - g) x_i + g (x_j + x_ij)`` (eq. 21) on the
     position, ``p_i <- (1 - g) p_i`` (eq. 22): the position block of ``P`` is scaled by
     ``1 - g`` (its cross terms with the heading by ``sqrt(1 - g)``, so ``P`` stays a covariance).
-    Uses :func:`swarmloc.agents.social_odometry.sgikf_update`. Returns ``(pose, cov, g)``."""
+    Uses :func:`swarmloc.agents.epuck.social_odometry.sgikf_update`. Returns ``(pose, cov, g)``."""
     p_own = np.array([spectral_norm_xy(cov)])
     p_other = np.array([spectral_norm_xy(fix_cov)])
     new_xy, _ = sgikf_update(pose[None, :2], p_own, fix_xy[None, :], p_other)
@@ -800,7 +800,7 @@ class _Cooperation:
 @dataclass(frozen=True)
 class PfParams:
     """The landmark particle filter's own parameters; every other key goes to
-    :class:`swarmloc.agents.amcl.AMCLParams` (``min_particles``, ``recovery``, ...)."""
+    :class:`swarmloc.agents.laser.amcl.AMCLParams` (``min_particles``, ``recovery``, ...)."""
 
     #: Resample when the effective sample size falls below this fraction of the particles
     #: (``amcl`` resamples every ``resample_interval`` updates; with 0.02 s ticks and a few
@@ -823,7 +823,7 @@ PF_AMCL_DEFAULTS = {"min_particles": 300, "max_particles": 2000, "bin_size_m": 0
 
 
 class ParticleFilterLocalizer:
-    """The AMCL-style particle filter (``agents/amcl.py``'s :class:`AugmentedMCL`) on landmark
+    """The AMCL-style particle filter (``agents/laser/amcl.py``'s :class:`AugmentedMCL`) on landmark
     readings: each tick the particles move with the odometry (per-step noise: the motion model
     at MRCLAM's typical command, :attr:`MotionNoise.typical_v_mps`, since the AMCL core takes one
     fixed noise); on a tick with readings, the weights are multiplied by the landmark likelihood
@@ -834,7 +834,7 @@ class ParticleFilterLocalizer:
     ``resample_ess_fraction``. In between, the estimate follows the odometry."""
 
     def __init__(self, setup: LandmarkSetup, params: Mapping, rng: np.random.Generator):
-        from swarmloc.agents.amcl import AMCLParams, AugmentedMCL
+        from swarmloc.agents.laser.amcl import AMCLParams, AugmentedMCL
 
         own = {k: v for k, v in params.items() if k in {f.name for f in fields(PfParams)}}
         amcl = {**PF_AMCL_DEFAULTS, **{k: v for k, v in params.items() if k not in own}}
@@ -931,7 +931,7 @@ class ParticleFilterLocalizer:
 @dataclass(frozen=True)
 class CfsgaMrclamParams:
     """The landmark CFS-GA's own parameters; every other key goes to
-    :class:`swarmloc.agents.cfsga.CFSGAParams` (``population_size``, ...)."""
+    :class:`swarmloc.agents.laser.cfsga.CFSGAParams` (``population_size``, ...)."""
 
     #: How many of its above-average individuals a robot broadcasts (fittest first).
     shared_individuals: int = 64
@@ -966,7 +966,7 @@ CFSGA_TRACKING_DEFAULTS = {"motion_diffusion": True}
 
 
 class CfsgaLocalizer:
-    """CFS-GA (``agents/cfsga.py``'s :class:`FitnessSharingGA`, seed 003) on landmark readings.
+    """CFS-GA (``agents/laser/cfsga.py``'s :class:`FitnessSharingGA`, seed 003) on landmark readings.
 
     Each tick every individual moves with the odometry plus its own draw of the motion noise
     (:meth:`MotionNoise.tick_std`). On a tick with landmark readings (or, cooperative, a reading
@@ -990,7 +990,7 @@ class CfsgaLocalizer:
     The estimate is the best individual (raw fitness times the aging factor)."""
 
     def __init__(self, setup: LandmarkSetup, params: Mapping, rng: np.random.Generator):
-        from swarmloc.agents.cfsga import CFSGAParams, FitnessSharingGA, box_sampler
+        from swarmloc.agents.laser.cfsga import CFSGAParams, FitnessSharingGA, box_sampler
 
         own_names = {f.name for f in fields(CfsgaMrclamParams)}
         own = {k: v for k, v in params.items() if k in own_names}
@@ -1178,7 +1178,7 @@ def _build_dr(setup, rng, params):
 
 
 def _build_ekf(setup, rng, params):
-    from swarmloc.agents.ekf import EkfLocalizer, EkfParams
+    from swarmloc.agents.replay.ekf import EkfLocalizer, EkfParams
 
     return EkfLocalizer(setup, params_from_dict(EkfParams, params, "ekf"), rng)
 

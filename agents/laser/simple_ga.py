@@ -9,7 +9,7 @@ having high fitness, will be exactly copied in the new population (elitism)". Th
 panmictic: any individual may mate with any other (no network, the difference from MR-SSGA that
 §2.1 stresses).
 
-Everything else is MR-SSGA's (``swarmloc.agents.ssga``): the fitness (eq. 1, and eq. 2 with the
+Everything else is MR-SSGA's (``swarmloc.agents.laser.ssga``): the fitness (eq. 1, and eq. 2 with the
 teammates' scans and sightings), the kinematic update (eq. 3), the best-individual estimate, the
 radio payload. ``p_chi``, ``p_mu`` and the number of elites are not given in 002; the defaults are
 ordinary values (Goldberg's ``p_chi`` ~ 0.6-0.9).
@@ -23,7 +23,7 @@ Reproduction (:func:`simple_ga_reproduction`):
 3. consecutive parents pair up; with probability ``crossover_prob`` a pair is replaced by its two
    convex combinations ``w a + (1 - w) b`` and ``(1 - w) a + w b``, ``w ~ U(0, 1)``;
 4. each of these individuals is mutated with probability ``mutation_prob``, with the standard
-   deviation of :func:`~swarmloc.agents.ssga.mutation_std` for its selected parent's fitness.
+   deviation of :func:`~swarmloc.agents.laser.ssga.mutation_std` for its selected parent's fitness.
 
 Draws per step (fixed order): selection (``rng.random(M)`` for the roulette,
 ``rng.integers(size=(M, k))`` for tournaments), ``rng.random(M // 2)`` crossover decisions,
@@ -37,7 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from swarmloc.agents.ssga import (
+from swarmloc.agents.laser.ssga import (
     GeneticLocalizer,
     GeneticParams,
     _positive_int,
@@ -53,7 +53,7 @@ SELECTIONS = ("roulette", "tournament")
 @dataclass(frozen=True)
 class SimpleGAParams(GeneticParams):
     """Simple GA parameters (see the module docstring); the shared ones are
-    :class:`~swarmloc.agents.ssga.GeneticParams`."""
+    :class:`~swarmloc.agents.laser.ssga.GeneticParams`."""
 
     selection: str = "roulette"
     tournament_size: int = 2

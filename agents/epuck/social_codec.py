@@ -4,7 +4,7 @@ What a robot broadcasts over its range-and-bearing board (seed 000 §3.2, §4.3,
 goal (nest, prey) the distance ``dy^i`` and angle of its estimate in its own body frame and its
 inverse confidence ``p`` (eq. 23), and the bearings it measured to the neighbours it heard last
 tick, which the receiver needs for the frame transform of eq. 27. The wire format is the one of
-:meth:`swarmloc.agents.foraging.SocialMessages.encode` (msgpack, floats as float32)::
+:meth:`swarmloc.agents.epuck.foraging.SocialMessages.encode` (msgpack, floats as float32)::
 
     [flags, d_nest, a_nest, p_nest, d_prey, a_prey, p_prey, [id0, bearing0, id1, bearing1, ...]]
 
@@ -31,7 +31,7 @@ from llvmlite import ir as llvm_ir
 from numba import njit, types
 from numba.extending import intrinsic
 
-#: Goal columns of the decoded arrays (as in ``agents/foraging.py``).
+#: Goal columns of the decoded arrays (as in ``agents/epuck/foraging.py``).
 NEST, PREY = 0, 1
 #: Output buffer size that always suffices for capacity <= 3 and ids <= 65535 (the board's payload).
 PAYLOAD_MAX_BYTES = 64
