@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from swarmloc.deploy.mrclam import ReplayConfig, run_replay, score
+from swarmloc.deploy.lab.replay.mrclam import ReplayConfig, run_replay, score
 from swarmloc.world.replay.mrclam import load_dataset
 
 DEFAULT = Path(__file__).resolve().parents[1].parent / "shared/data/mrclam/MRCLAM_Dataset6"

@@ -101,8 +101,8 @@ def load_scenario(name_or_path: str = DEFAULT_SCENARIO, overrides: list[str] = (
 #: family -> "module:Class" of its scenario (``from_dict``/``to_dict``, validated, strict).
 FAMILY_SCENARIOS: dict[str, str] = {
     "foraging": "swarmloc.deploy.scenario:Scenario",
-    "laser": "swarmloc.deploy.laser_batch:LaserScenario",
-    "vision": "swarmloc.deploy.vision_batch:VisionScenario",
+    "laser": "swarmloc.deploy.lab.laser.runner:LaserScenario",
+    "vision": "swarmloc.deploy.lab.vision.runner:VisionScenario",
     "replay": "swarmloc.world.replay.service:ReplayScenario",
 }
 

@@ -192,7 +192,7 @@ def exercise(ticks: int = 40) -> None:
     from swarmloc.agents.epuck.agent import ForagingAgent
     from swarmloc.agents.epuck.foraging import ForagingBrain, agent_rng
     from swarmloc.agents.epuck.social_odometry import STRATEGIES
-    from swarmloc.deploy.batch import run_batch
+    from swarmloc.deploy.lab.epuck.batch import run_batch
     from swarmloc.deploy.scenario import load_any
     from swarmloc.protocol.errors import ErrorCounter
     from swarmloc.protocol.messages import EpuckAct, EpuckSense, decode

@@ -16,8 +16,8 @@ import msgpack
 import numpy as np
 import pytest
 
-from swarmloc.agents.epuck.agent_tick import PackedForagingTick
 from swarmloc.agents.epuck.agent import ForagingAgent
+from swarmloc.agents.epuck.agent_tick import PackedForagingTick
 from swarmloc.agents.epuck.foraging import ForagingBrain, agent_rng
 from swarmloc.agents.epuck.social_odometry import STRATEGIES
 from swarmloc.deploy.scenario import load_any

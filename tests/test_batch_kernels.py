@@ -10,7 +10,7 @@ The per-tick kernels draw from numpy generators and evaluate numpy's ``exp`` and
 themselves: their numbers are checked against numpy's, and a world tick against the public model
 functions it stands in for (sensors, medium, kinematics, collisions, metrics), including poses
 changed between the calls and buffers too small for the swarm. The batch engine's compiled tick
-(deploy/batch.py) must leave the world and the brains as their methods do.
+(deploy/lab/epuck/batch.py) must leave the world and the brains as their methods do.
 """
 
 from __future__ import annotations
@@ -24,9 +24,15 @@ from numba import njit
 
 from swarmloc import numerics
 from swarmloc.agents.epuck import kernels as agent_kernels
-from swarmloc.agents.epuck.foraging import AgentConfig, ForagingBrain, Inbox, SocialMessages, agent_rng
+from swarmloc.agents.epuck.foraging import (
+    AgentConfig,
+    ForagingBrain,
+    Inbox,
+    SocialMessages,
+    agent_rng,
+)
 from swarmloc.agents.epuck.social_odometry import sgiff_update
-from swarmloc.deploy.batch import CompiledTicks, inbox_from, run_ticks, swarm_brain
+from swarmloc.deploy.lab.epuck.batch import CompiledTicks, inbox_from, run_ticks, swarm_brain
 from swarmloc.deploy.scenario import load_scenario
 from swarmloc.protocol.epuck import (
     EpuckBody,

@@ -29,7 +29,7 @@ from swarmloc.agents.epuck.foraging import (
     classify_ground,
     on_path,
 )
-from swarmloc.deploy.batch import inbox_from, swarm_brain
+from swarmloc.deploy.lab.epuck.batch import inbox_from, swarm_brain
 from swarmloc.deploy.scenario import load_scenario
 from swarmloc.protocol.epuck import EpuckBody
 from swarmloc.world.epuck.foraging import ForagingWorld

@@ -123,7 +123,7 @@ def make_sense(n_received: int, robot_id: int = 7, tick: int = 300, final: bool 
 def _record(overrides: list[str], ticks: int) -> list[tuple[int, bytes]]:
     from swarmloc.agents.epuck.agent import ForagingAgent
     from swarmloc.agents.epuck.foraging import ForagingBrain, agent_rng
-    from swarmloc.deploy.netns import SMALL_ARENA
+    from swarmloc.deploy.lab.netns import SMALL_ARENA
     from swarmloc.deploy.scenario import load_any
     from swarmloc.protocol.errors import ErrorCounter
     from swarmloc.world.service import served_world

@@ -13,8 +13,8 @@ from swarmloc.agents.epuck.global_imitation import (
     to_robot_frames,
     transfer,
 )
-from swarmloc.deploy.batch import run_batch, swarm_brain
 from swarmloc.deploy.cli import main
+from swarmloc.deploy.lab.epuck.batch import run_batch, swarm_brain
 from swarmloc.deploy.scenario import load_scenario
 from swarmloc.world.epuck.foraging import ForagingWorld
 
@@ -118,7 +118,7 @@ def test_in_the_batch_engine_every_robot_holds_the_same_arena_point_each_tick():
                                       "world.seed=4"])
     world, brain = ForagingWorld(sc.world), swarm_brain(sc)
     from swarmloc.agents.epuck.foraging import on_path
-    from swarmloc.deploy.batch import inbox_from
+    from swarmloc.deploy.lab.epuck.batch import inbox_from
 
     sent, checked = None, 0
     while not world.done:

@@ -20,7 +20,7 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from swarmloc.deploy.batch import run_batch, run_ticks, swarm_brain
+from swarmloc.deploy.lab.epuck.batch import run_batch, run_ticks, swarm_brain
 from swarmloc.deploy.launch import ONE_THREAD_ZENOH_RUNTIME, supervised
 from swarmloc.deploy.run import start_swarm
 from swarmloc.deploy.scenario import load_scenario

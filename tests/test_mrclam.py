@@ -27,7 +27,7 @@ from swarmloc.agents.replay.localizers import (
     decode_report,
     sgikf_fuse,
 )
-from swarmloc.deploy.mrclam import ReplayConfig, fit_camera, run_replay, score
+from swarmloc.deploy.lab.replay.mrclam import ReplayConfig, fit_camera, run_replay, score
 from swarmloc.world.replay.mrclam import (
     MrclamFormatError,
     SyntheticConfig,

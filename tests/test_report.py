@@ -15,8 +15,8 @@ from pathlib import Path
 import pytest
 
 from swarmloc.config import ConfigError
-from swarmloc.deploy import report
-from swarmloc.deploy.report import add_parser, build_report, load_results
+from swarmloc.deploy.lab.epuck import report
+from swarmloc.deploy.lab.epuck.report import add_parser, build_report, load_results
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 GRID = ["agent.strategy", "agent.beta", "world.robots", "world.odometry.slip_fraction"]

@@ -1,4 +1,4 @@
-"""The vision brain (agents/vision/brain.py) and the in-process runner (deploy/vision_batch.py),
+"""The vision brain (agents/vision/brain.py) and the in-process runner (deploy/lab/vision/runner.py),
 seed 004 §II-IV.
 
 Expected values come from the geometry of the placed robots and objects (plain trigonometry in
@@ -19,7 +19,6 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from swarmloc.agents.vision.cooperative import Detection
 from swarmloc.agents.vision.brain import (
     MAX_SHARE_BYTES,
     SharedFrame,
@@ -29,8 +28,9 @@ from swarmloc.agents.vision.brain import (
     decode_share,
     encode_share,
 )
-from swarmloc.deploy import vision_batch as vb
+from swarmloc.agents.vision.cooperative import Detection
 from swarmloc.deploy.cli import main as cli_main
+from swarmloc.deploy.lab.vision import runner as vb
 from swarmloc.world.vision.camera import CameraParams, make_object, render
 from swarmloc.world.vision.world import (
     FieldObject,

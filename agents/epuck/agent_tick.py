@@ -27,9 +27,9 @@ import numpy as np
 from numba import njit
 
 from swarmloc.agents.epuck import kernels
-from swarmloc.agents.epuck.wire import N_PERCEPTS, encode_act, parse_sense
 from swarmloc.agents.epuck.foraging import _COS_IR, _SIN_IR
 from swarmloc.agents.epuck.social_codec import decode_payload, encode_payload
+from swarmloc.agents.epuck.wire import N_PERCEPTS, encode_act, parse_sense
 
 #: Header slots of the int buffer: robots, heard capacity, encounter memory, inbox capacity, the
 #: tick count, how many payloads the last tick rejected, how many messages it received, the

@@ -428,7 +428,7 @@ class ForagingBrain:
         return fn, state
 
     # The pieces of a call of agents/epuck/kernels.py: brain_tick, in its argument order: also for the
-    # batch engine's compiled tick (deploy/batch.py), which calls brain_tick from there.
+    # batch engine's compiled tick (deploy/lab/epuck/batch.py), which calls brain_tick from there.
 
     def _tick_state(self, new_pose: np.ndarray) -> tuple:
         """The state arguments of this tick: the pose before, ``new_pose`` (written), the pose of

@@ -20,7 +20,7 @@ arena frame by its robot's true and believed poses and back (:func:`to_arena_fra
 :func:`to_robot_frames`), the test that pins eq. 27 here.
 
 The central system needs the true poses, which only the world has: it runs in the batch engine
-(:mod:`swarmloc.deploy.batch`), between the brains' step and the world's. The world-server and the
+(:mod:`swarmloc.deploy.lab.epuck.batch`), between the brains' step and the world's. The world-server and the
 agent processes refuse the strategy (``Strategy.central``) rather than run something else.
 """
 

@@ -3,7 +3,7 @@ by the world-server over Zenoh.
 
 The shell of :mod:`swarmloc.agents.node` calls :meth:`LaserAgent.act` with each decoded
 :class:`LaserSense`; the localizer is built exactly as the in-process runner builds it
-(:func:`swarmloc.deploy.laser_batch.run_laser`): same registry entry, same parameters, same
+(:func:`swarmloc.deploy.lab.laser.runner.run_laser`): same registry entry, same parameters, same
 setup, same generator from (seed, robot id). So a process run reproduces an in-process run.
 """
 
@@ -27,7 +27,7 @@ class LaserAgent:
     @classmethod
     def from_welcome(cls, welcome: Welcome, scenario) -> LaserAgent:
         from swarmloc.agents.epuck.foraging import agent_rng
-        from swarmloc.deploy.laser_batch import ALGORITHMS
+        from swarmloc.deploy.lab.laser.runner import ALGORITHMS
 
         config, algo = scenario.world, scenario.algorithm
         if welcome.robot_id >= config.robots:

@@ -1,7 +1,7 @@
 """A robot of a replayed data set (MRCLAM) as an agent process: one landmark localizer (EKF,
 particle filter, CFS-GA, dead reckoning; alone or cooperative) fed by the replay world over Zenoh.
 
-Built exactly as the in-process evaluation builds it (:func:`swarmloc.deploy.mrclam.replay_localizer`:
+Built exactly as the in-process evaluation builds it (:func:`swarmloc.deploy.lab.replay.mrclam.replay_localizer`:
 same calibration, initial pose and generator), so a process run gives the same estimates.
 """
 
@@ -25,7 +25,7 @@ class ReplayAgent:
     @classmethod
     def from_welcome(cls, welcome: Welcome, scenario) -> ReplayAgent:
         from swarmloc.config import ConfigError
-        from swarmloc.deploy.mrclam import replay_localizer, replay_world
+        from swarmloc.deploy.lab.replay.mrclam import replay_localizer, replay_world
 
         try:
             dataset = scenario.load()

@@ -45,7 +45,7 @@ MRCLAM literature initialises from the first ground-truth pose) with ``initial_s
 Noise parameters. :class:`CameraNoise`'s defaults are the raw camera of
 ``../shared/data/mrclam/SOURCE.md`` (bearing std 0.012-0.016 rad; range error std about 0.18 m
 overall, modelled as 0.02 m + 4 % of the range); most of that range error is a bias that
-depends on the bearing, which :func:`swarmloc.deploy.mrclam.fit_camera` calibrates per robot
+depends on the bearing, which :func:`swarmloc.deploy.lab.replay.mrclam.fit_camera` calibrates per robot
 (on the first 120 s of the run against the Vicon ground truth) and
 :meth:`CameraNoise.corrected_range` removes. :class:`MotionNoise`'s defaults follow the
 commanded-vs-true velocity errors of Dataset 6 (speed error std 0.015-0.02 m/s, turn-rate error
@@ -148,7 +148,7 @@ class CameraNoise:
     about ``r (1 + c0 + c2 b^2)`` of the true range ``r`` at bearing ``b`` (Dataset 6: ``c0``
     between 0.025 and 0.066 depending on the robot, ``c2`` about -0.46: +3 % straight ahead, -9 %
     at the edge of the field of view). :meth:`corrected_range` divides it out; the calibration
-    comes from :func:`swarmloc.deploy.mrclam.fit_camera` (defaults: no correction). ``teammate_*``
+    comes from :func:`swarmloc.deploy.lab.replay.mrclam.fit_camera` (defaults: no correction). ``teammate_*``
     are the same coefficients for readings of robots (their barcode tubes differ from the
     landmarks').
 

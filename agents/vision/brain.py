@@ -4,7 +4,7 @@ Seed 004 (``seeds/004_e71d8ee95e0baa56.txt``: Peula et al., "Explicit coordinate
 using common visual objects"), §II-IV, eq. 1-5.
 :class:`VisionBrain` is one robot's brain, a pure model (no Zenoh, no clock, no global random
 state) that runs inside an agent process or inside the in-process runner
-(``swarmloc.deploy.vision_batch``). Each tick (:meth:`VisionBrain.step`):
+(``swarmloc.deploy.lab.vision.runner``). Each tick (:meth:`VisionBrain.step`):
 
 1. **Image** (§III, colour events): the encoded camera frame is decoded (:func:`decode_image`: a
    payload that does not decode, or decodes to the wrong size, raises ``ValueError`` naming the
@@ -90,6 +90,7 @@ from swarmloc.agents.vision.cooperative import (
     teammate_from_common_object,
     wrap_rad,
 )
+from swarmloc.agents.vision.detection import COLOUR_CLASSES, detect_blobs
 from swarmloc.agents.vision.potential_field import (
     BALL,
     OBSTACLE,
@@ -97,7 +98,6 @@ from swarmloc.agents.vision.potential_field import (
     assign_goals,
     potential_field,
 )
-from swarmloc.agents.vision.detection import COLOUR_CLASSES, detect_blobs
 from swarmloc.world.vision.camera import OBJECT_KINDS, CameraParams
 from swarmloc.world.vision.world import VisionCommand, VisionObservation
 

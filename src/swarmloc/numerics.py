@@ -29,7 +29,6 @@ from llvmlite import ir as llvm_ir
 from numba import njit, objmode, types
 from numba.extending import intrinsic
 
-
 #: How kernels get numpy's float64 ``exp`` and ``arctan2`` bit for bit (:func:`numpy_math`):
 #: numpy's own SIMD routines (SVML, on x86-64 with AVX-512), the C library's, or numpy itself.
 MATH_SVML, MATH_LIBM, MATH_NUMPY = 0, 1, 2

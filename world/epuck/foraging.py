@@ -320,7 +320,7 @@ class ForagingWorld:
         self._finish_step(pose, encoder, self.tick + 1, on_path_count, on_path)
 
     # The arguments of world/epuck/kernels.py: observe_tick and step_tick, in their order: also for the
-    # batch engine's compiled tick (deploy/batch.py), which calls them from there.
+    # batch engine's compiled tick (deploy/lab/epuck/batch.py), which calls them from there.
 
     def _observe_args(self, pose, ir, ground, sender, receiver, range_m, bearing_rad) -> tuple:
         """``observe_tick``'s arguments, sensing at ``pose`` into ``ir``, ``ground`` and the
@@ -345,7 +345,7 @@ class ForagingWorld:
                 self._per_robot, self._work_i, self._work_f, self._step_u)
 
     def _finish_step(self, pose, encoder, tick: int, on_path_count: int, on_path: np.ndarray) -> None:
-        """After ``step_tick`` (here or in the batch engine's compiled tick, deploy/batch.py):
+        """After ``step_tick`` (here or in the batch engine's compiled tick, deploy/lab/epuck/batch.py):
         the new state; ``on_path_count`` < 0 means a crowd, whose collisions are resolved here."""
         self.pose = pose
         self.encoder_steps = encoder

@@ -4,7 +4,7 @@ A :class:`~swarmloc.world.service.ServedWorld` around :class:`~swarmloc.world.la
 each tick it sends every live robot a :class:`LaserSense` (odometry, scan, sightings, the radio
 messages of the previous tick), takes each :class:`EstimateAct` (pose estimate, broadcast), scores
 the estimates against the true poses the observation was taken at, and steps the world with the
-broadcasts. The scoring is :func:`swarmloc.deploy.laser_batch.summarize`, the in-process runner's,
+broadcasts. The scoring is :func:`swarmloc.deploy.lab.laser.runner.summarize`, the in-process runner's,
 so a process run and an in-process run of one seed report the same figures.
 
 A robot whose agent is gone keeps being driven (the world moves the laser robots); it sends
@@ -93,7 +93,7 @@ class LaserService(DrivenRobots):
         )
 
     def summary(self) -> dict:
-        from swarmloc.deploy.laser_batch import pose_errors, summarize
+        from swarmloc.deploy.lab.laser.runner import pose_errors, summarize
 
         k = self.world.step_index
         if k == 0:

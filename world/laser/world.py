@@ -3,7 +3,7 @@
 Seeds: ``/work/shared/seeds/002_fe2ac635ba0eab3e.txt`` (MR-SSGA: eq. 3-4, table 2, §6 fig. 8) and
 ``/work/shared/seeds/003_5278cbbbf8cc61de.txt`` (CFS-GA: §IV-B, table I, §V figs. 1-4).
 
-One pure model serves the in-process runner (``deploy/laser_batch.py``) and, unchanged, a
+One pure model serves the in-process runner (``deploy/lab/laser/runner.py``) and, unchanged, a
 world-server: it never touches a transport, a clock or global random state.
 
 Per step ``k`` (lockstep):

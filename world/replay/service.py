@@ -2,10 +2,10 @@
 world-server shell (issue 7).
 
 :class:`ReplayScenario` names the data set folder and the localizer configuration
-(:class:`~swarmloc.deploy.mrclam.ReplayConfig`); :class:`ReplayService` feeds every live robot a
+(:class:`~swarmloc.deploy.lab.replay.mrclam.ReplayConfig`); :class:`ReplayService` feeds every live robot a
 :class:`ReplaySense` per tick (recorded odometry, landmark and robot measurements, teammates'
 broadcasts of the previous tick), takes its :class:`EstimateAct` and scores the estimates against
-the Vicon ground truth with the in-process evaluation's :func:`~swarmloc.deploy.mrclam.score`.
+the Vicon ground truth with the in-process evaluation's :func:`~swarmloc.deploy.lab.replay.mrclam.score`.
 Agents read the data set's landmark map and their calibration from the same folder (the map of a
 replay is part of the scenario), so a replay over processes runs where the folder is readable.
 Robot ``i`` of the run (its keys) is the data set's ``robot_ids[i]``.
@@ -56,7 +56,7 @@ class ReplayScenario:
             raise ConfigError(f"replay scenario: {exc}") from None
 
     def config(self):
-        from swarmloc.deploy.mrclam import ReplayConfig
+        from swarmloc.deploy.lab.replay.mrclam import ReplayConfig
 
         return ReplayConfig(algorithm=self.algorithm, cooperative=self.cooperative, seed=self.seed,
                             dt_s=self.dt_s, params=dict(self.params), duration_s=self.duration_s,
@@ -96,7 +96,7 @@ class _ReplayFacts:
         self.seed = scenario.seed
         dataset = scenario.load()
         self.robots = len(dataset.robot_ids)
-        from swarmloc.deploy.mrclam import replay_world
+        from swarmloc.deploy.lab.replay.mrclam import replay_world
 
         self.steps = replay_world(dataset, scenario.config()).n_ticks
 
@@ -106,7 +106,7 @@ class ReplayService(DrivenRobots):
     act_type = EstimateAct
 
     def __init__(self, scenario: ReplayScenario) -> None:
-        from swarmloc.deploy.mrclam import replay_world
+        from swarmloc.deploy.lab.replay.mrclam import replay_world
 
         self.scenario = scenario
         self.config = scenario.config()
@@ -162,7 +162,7 @@ class ReplayService(DrivenRobots):
         )
 
     def summary(self) -> dict:
-        from swarmloc.deploy.mrclam import ReplayResult, score
+        from swarmloc.deploy.lab.replay.mrclam import ReplayResult, score
 
         k = self.world.tick
         if k == 0:

@@ -6,7 +6,7 @@ head pan), takes each :class:`VisionAct` (walking command, head command, and the
 estimates), scores the estimates against ground truth, and steps the world. Detections travel
 between agents directly on the team keys (``swarmloc/<run>/team/<team>/blobs/<id>``), not through
 the world. The run's layout comes from the scenario and its seed exactly as the in-process runner
-(:func:`swarmloc.deploy.vision_batch.run_vision`) draws it, and the figures are the same ones.
+(:func:`swarmloc.deploy.lab.vision.runner.run_vision`) draws it, and the figures are the same ones.
 
 An Act whose estimates are malformed is counted (``bad_estimates``) and its command still applies.
 """
@@ -35,7 +35,7 @@ class VisionService:
     act_type = VisionAct
 
     def __init__(self, scenario) -> None:
-        from swarmloc.deploy.vision_batch import world_config
+        from swarmloc.deploy.lab.vision.runner import world_config
         from swarmloc.world.vision.camera import OBJECT_KINDS
         from swarmloc.world.vision.world import STOP, VisionWorld
 

@@ -3,7 +3,7 @@
 Seed 004 (``seeds/004_e71d8ee95e0baa56.txt``) §II-IV: Aibo ERS-7 robots (a body with one camera on a pan head) walk on a flat field
 with objects of known size and colour, a pink ball, yellow teammates, orange rivals and the orange
 obstacle box of experiments 2 and 3, and blue beacons. This module is the pure world model that
-the batch runner (``swarmloc.deploy.vision_batch``) steps, and that a world-server shell can step
+the batch runner (``swarmloc.deploy.lab.vision.runner``) steps, and that a world-server shell can step
 over Zenoh: ``observe()`` gives each robot its camera frame and its odometry, ``step(commands)``
 moves the robots by their velocity and head commands.
 
@@ -47,7 +47,13 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from swarmloc.world.vision.camera import OBJECT_KINDS, CameraParams, SceneObject, make_object, render
+from swarmloc.world.vision.camera import (
+    OBJECT_KINDS,
+    CameraParams,
+    SceneObject,
+    make_object,
+    render,
+)
 
 #: Stream id of the world's generator (``[seed, stream]``).
 WORLD_STREAM = 0

@@ -592,7 +592,7 @@ def fixed_values_from_spec(spec: str | Path) -> dict[tuple[str, str], dict[str, 
     """What each group of an experiment spec fixes (its ``set`` table), keyed by (experiment,
     group): values the results file has no column for. ``spec``: a shipped spec's name or a
     ``.toml`` path. Raises ConfigError if it cannot be loaded."""
-    from swarmloc.deploy.experiment import load_spec
+    from swarmloc.deploy.lab.experiment import load_spec
 
     loaded = load_spec(spec)
     return {(loaded.name, g.name): dict(g.set) for g in loaded.groups}
@@ -601,7 +601,7 @@ def fixed_values_from_spec(spec: str | Path) -> dict[tuple[str, str], dict[str, 
 def _fixed_values_of_shipped_specs(rows: Sequence[dict]) -> dict[tuple[str, str], dict]:
     """:func:`fixed_values_from_spec` for every experiment of the rows that is a shipped spec."""
     try:
-        from swarmloc.deploy.experiment import shipped_specs
+        from swarmloc.deploy.lab.experiment import shipped_specs
 
         shipped = set(shipped_specs())
     except (ImportError, OSError):
@@ -1720,7 +1720,7 @@ def main_report(args) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m swarmloc.deploy.report RESULTS.csv ...``, with the CLI's exit codes."""
+    """``python -m swarmloc.deploy.lab.epuck.report RESULTS.csv ...``, with the CLI's exit codes."""
     parser = argparse.ArgumentParser(prog="swarmloc")
     add_parser(parser.add_subparsers(dest="command", required=True))
     args = parser.parse_args(["report", *(sys.argv[1:] if argv is None else argv)])

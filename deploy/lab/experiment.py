@@ -32,7 +32,7 @@ on_path_fraction_mean; lost_total), wall_s, and config_hash (the scenario withou
 file whose rows were made with another configuration is refused rather than mixed.
 
 A spec with ``family = "laser"`` runs the laser robots (seeds 002-003) instead: its scenarios are
-laser scenarios, and ``deploy/laser_experiment.py`` builds its settings, runs its jobs and gives
+laser scenarios, and ``deploy/lab/laser/experiment.py`` builds its settings, runs its jobs and gives
 its columns (:data:`FAMILIES`); the spec format, plan, pool, resume and progress are these.
 """
 
@@ -78,7 +78,7 @@ METRIC_COLUMNS = ("recruitment_time_s", "robots_found_both", "round_trips_total"
 #: Robot families an experiment can run: None for the e-puck family of this module, else the
 #: module (imported when needed) whose ``settings(spec)``, ``run_job(job)``, ``columns(spec)``
 #: and ``row(spec, job, out)`` replace this module's.
-FAMILIES = {"epuck": None, "laser": "swarmloc.deploy.laser_experiment"}
+FAMILIES = {"epuck": None, "laser": "swarmloc.deploy.lab.laser.experiment"}
 
 
 def _family(name: str):
@@ -391,7 +391,7 @@ def run_job(job: Job) -> dict:
     module = _family(job.family)
     if module is not None:
         return module.run_job(job)
-    from swarmloc.deploy.batch import run_batch
+    from swarmloc.deploy.lab.epuck.batch import run_batch
 
     t0 = time.perf_counter()
     scenario = load_scenario(job.scenario, list(job.overrides))

@@ -8,21 +8,21 @@ Specs are ordinary experiment specs (``deploy/experiments/laser-*.toml``) with
 ``section.key`` values, each setting run ``replications`` times with seeds ``seed + r``. The
 machinery of ``swarmloc experiment`` runs them (spec checks, plan, spawned pool, one CSV row per
 finished job, resume, progress); this module supplies what is laser-specific, through the
-hooks of :data:`swarmloc.deploy.experiment.FAMILIES`:
+hooks of :data:`swarmloc.deploy.lab.experiment.FAMILIES`:
 
 - :func:`settings`: every setting's scenario built and validated before anything runs (a group's
   ``duration_s`` becomes ``world.steps``);
-- :func:`run_job`: one replication with :func:`~swarmloc.deploy.laser_batch.run_laser`;
+- :func:`run_job`: one replication with :func:`~swarmloc.deploy.lab.laser.runner.run_laser`;
 - :func:`columns` and :func:`row`: the tidy results file. Columns: the setting (experiment,
   group, setting, scenario, map, algorithm, population, cooperative, robots, steps, seed,
   replication, one column per grid key), the run summary (``laser_batch`` module docstring),
   cpu_s, wall_s, config_hash, and ``position_error_mm``: every robot's error at every step
-  (:func:`~swarmloc.deploy.laser_batch.encode_series_mm`), from which the report draws the
+  (:func:`~swarmloc.deploy.lab.laser.runner.encode_series_mm`), from which the report draws the
   papers' error-over-time figures.
 
 The shipped specs: ``laser-table3`` (002 table 3), ``laser-kidnap`` (003 fig. 3),
 ``laser-collab`` (003 fig. 4) and ``laser-robustness`` (003 §V, 500 runs). ``swarmloc
-laser-experiment`` runs specs and writes the report (``deploy/laser_report.py``);
+laser-experiment`` runs specs and writes the report (``deploy/lab/laser/report.py``);
 ``--replications N`` makes a preview that the full run later resumes from;
 ``swarmloc experiment laser-kidnap`` runs one spec alone.
 """
@@ -36,7 +36,7 @@ from importlib import resources
 from pathlib import Path
 
 from swarmloc.config import ConfigError
-from swarmloc.deploy.experiment import (
+from swarmloc.deploy.lab.experiment import (
     ExperimentSpec,
     Job,
     Setting,
@@ -44,7 +44,7 @@ from swarmloc.deploy.experiment import (
     run_experiment,
     with_overrides,
 )
-from swarmloc.deploy.laser_batch import encode_series_mm, load_laser_scenario, run_laser
+from swarmloc.deploy.lab.laser.runner import encode_series_mm, load_laser_scenario, run_laser
 
 #: The setting's description, before the grid keys.
 LEAD_COLUMNS = ("experiment", "group", "setting", "scenario", "map", "algorithm", "population",
@@ -152,7 +152,7 @@ def results_path(results_dir: Path, spec: ExperimentSpec) -> Path:
 def main_laser_experiment(args) -> int:
     """``swarmloc laser-experiment [SPEC ...]``: run laser specs (resumable), then write the
     report from their results files."""
-    from swarmloc.deploy.laser_report import write_report
+    from swarmloc.deploy.lab.laser.report import write_report
 
     names = args.specs or list(REPORT_SPECS)
     specs = [with_overrides(load_spec(name), replications=args.replications) for name in names]

@@ -27,7 +27,7 @@ computed (using the Euclidean metric) with respect to the best hypothesis": the 
   table 3 is below 0.21 m, so they are errors after convergence. Our reading: each trial's
   team error after the last meeting, i.e. this per-trial final error (the table-3 scenario's
   window is the last 50 of 400 steps, after the third robot joins), and min / max / mean over
-  trials of it (``deploy/laser_report.py``, :func:`~swarmloc.deploy.laser_report.table3_indexes`).
+  trials of it (``deploy/lab/laser/report.py``, :func:`~swarmloc.deploy.lab.laser.report.table3_indexes`).
 - ``settle_step``: the step from which every robot's error stays below ``settle_error_m``
   (0.15 m, 003 §V fig. 4) to the end, for at least the final window; empty if some robot never
   settles. Kidnapped robots count from their last kidnap.
@@ -45,7 +45,7 @@ computed (using the Euclidean metric) with respect to the best hypothesis": the 
 Algorithms are chosen by name from :data:`ALGORITHMS` (a registry that rejects duplicates):
 ``ssga`` (MR-SSGA, 002), ``simple_ga`` (the simple GA of 002 table 3), ``cfsga`` (CFS-GA, 003),
 ``amcl`` (AMCL-style particle filter with KLD sampling and recovery, 003; the collaborative PF of
-002 table 3 with a fixed population). ``python -m swarmloc.deploy.laser_batch SCENARIO`` runs one.
+002 table 3 with a fixed population). ``python -m swarmloc.deploy.lab.laser.runner SCENARIO`` runs one.
 """
 
 from __future__ import annotations
@@ -72,8 +72,8 @@ from swarmloc.agents.epuck.foraging import agent_rng
 from swarmloc.agents.laser.localizer import Localizer, LocalizerSetup
 from swarmloc.config import ConfigError, apply_overrides, from_dict, load_toml, to_dict
 from swarmloc.world.laser.laser import wrap_angle
-from swarmloc.world.laser.world import WORLD_STREAM, LaserWorld, LaserWorldConfig
 from swarmloc.world.laser.maps import MAPS, SegmentMap
+from swarmloc.world.laser.world import WORLD_STREAM, LaserWorld, LaserWorldConfig
 
 # -- algorithms -------------------------------------------------------------------------------
 
@@ -508,8 +508,8 @@ def decode_series_mm(text: str) -> np.ndarray:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m swarmloc.deploy.laser_batch SCENARIO``: one run, its summary as JSON."""
-    parser = argparse.ArgumentParser(prog="python -m swarmloc.deploy.laser_batch",
+    """``python -m swarmloc.deploy.lab.laser.runner SCENARIO``: one run, its summary as JSON."""
+    parser = argparse.ArgumentParser(prog="python -m swarmloc.deploy.lab.laser.runner",
                                      description=main.__doc__)
     parser.add_argument("scenario", help=f"shipped ({', '.join(laser_scenario_names())}) "
                                          f"or a .toml file")

@@ -53,13 +53,13 @@ from pathlib import Path
 
 import numpy as np
 
-from swarmloc.agents.vision.detection import detect_blobs
 from swarmloc.agents.vision.brain import (
     VisionAgentConfig,
     VisionBrain,
     decode_image,
     detections_from_blobs,
 )
+from swarmloc.agents.vision.detection import detect_blobs
 from swarmloc.config import ConfigError, apply_overrides, from_dict, load_toml, to_dict
 from swarmloc.protocol.keys import Keys
 from swarmloc.world.vision.camera import OBJECT_KINDS, CameraParams, make_object, project, render
