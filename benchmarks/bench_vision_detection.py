@@ -7,7 +7,7 @@ Prints, on one core:
    issue's budget: 5 ms), and the path an agent's frame takes: render + JPEG encode (world) +
    decode + detect + the agent's detections (``swarmloc.agents.vision.brain``).
    Also the CPU of one ``VisionBrain.step`` (the agent's whole tick) on experiment 1.
-2. ``swarmloc.deploy.lab.vision.runner.detection_accuracy``: detection rate and median bearing and
+2. ``swarmloc.deploy.lab.vision.experiment.detection_accuracy``: detection rate and median bearing and
    distance errors of every object kind over distance, and of the ball and a teammate partly
    hidden by a nearer robot, against the rendered ground truth (markdown; the same table as in
    ``docs/vision/README.md``).
@@ -33,7 +33,7 @@ from swarmloc.agents.vision.brain import (
     VisionAgentConfig,
     VisionBrain,
 )
-from swarmloc.deploy.lab.vision.runner import (
+from swarmloc.deploy.lab.vision.experiment import (
     TIMING_SCENE,
     detection_accuracy,
     detection_table,

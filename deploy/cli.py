@@ -250,7 +250,7 @@ def main_laser_experiment(args) -> int:
 
 
 def main_vision_experiment(args) -> int:
-    from swarmloc.deploy.lab.vision.runner import main as run
+    from swarmloc.deploy.lab.vision.experiment import main as run
 
     return run(args)
 
