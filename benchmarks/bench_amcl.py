@@ -27,7 +27,8 @@ import time
 
 import numpy as np
 
-from swarmloc.agents.laser.amcl import AMCLLocalizer, AMCLParams, BeliefSummary, encode_belief
+from swarmloc.agents.laser.amcl import AMCLLocalizer, AMCLParams
+from swarmloc.agents.laser.amcl_belief import BeliefSummary, encode_belief
 from swarmloc.agents.laser.localizer import (
     LaserObservation,
     LocalizerSetup,

@@ -17,23 +17,22 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.stats import chi2, norm, vonmises
 
-from swarmloc.agents.laser.amcl import (
+from swarmloc.agents.laser.amcl import AMCLLocalizer, AMCLParams, AugmentedMCL, build_distance_field
+from swarmloc.agents.laser.amcl_belief import (
     MAX_SHARED_SAMPLES,
-    AMCLLocalizer,
-    AMCLParams,
-    AugmentedMCL,
     BeliefSummary,
-    best_cluster_estimate,
-    build_distance_field,
-    cluster_labels,
     decode_belief,
     encode_belief,
+    poses_from_teammate,
+    teammate_log_factor,
+)
+from swarmloc.agents.laser.amcl_sampling import (
+    best_cluster_estimate,
+    cluster_labels,
     kld_sample_count,
     kld_sample_size,
     low_variance_resample,
-    poses_from_teammate,
     recovery_probability,
-    teammate_log_factor,
 )
 from swarmloc.agents.laser.localizer import (
     MAX_RADIO_PAYLOAD_BYTES,

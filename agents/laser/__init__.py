@@ -2,7 +2,9 @@
 
 Seeds 002 (MR-SSGA, :mod:`~swarmloc.agents.laser.ssga`, and the simple GA it is compared with,
 :mod:`~swarmloc.agents.laser.simple_ga`) and 003 (CFS-GA, :mod:`~swarmloc.agents.laser.cfsga`,
-and the AMCL-style particle filter it is compared with, :mod:`~swarmloc.agents.laser.amcl`), all
-behind the localizer contract of :mod:`~swarmloc.agents.laser.localizer`;
-:mod:`~swarmloc.agents.laser.agent` is the adapter the agent-node shell runs (family ``laser``).
+and the AMCL-style particle filter both compare with, :mod:`~swarmloc.agents.laser.amcl`, with its
+particle-set arithmetic in :mod:`~swarmloc.agents.laser.amcl_sampling` and its teammates' beliefs
+in :mod:`~swarmloc.agents.laser.amcl_belief`), all behind the localizer contract of
+:mod:`~swarmloc.agents.laser.localizer`; :mod:`~swarmloc.agents.laser.agent` is the adapter the
+agent-node shell runs (family ``laser``).
 """

@@ -34,7 +34,8 @@ One step (:meth:`AugmentedMCL.update`, driven by :meth:`AMCLLocalizer.step`):
    distance, bearing, relative heading) and has its broadcast belief summary (a small set of
    weighted pose samples with a kernel, :class:`BeliefSummary`) multiplies each particle's
    weight by the density of the teammate's belief at the pose that particle predicts for the
-   teammate through the measured relative pose (:func:`teammate_log_factor`), with the relative
+   teammate through the measured relative pose
+   (:func:`~swarmloc.agents.laser.amcl_belief.teammate_log_factor`), with the relative
    observation noise, mixed with a uniform density (``teammate_outlier_probability``) so that a
    teammate that is wrong cannot erase the true hypothesis. Optional, beyond the seeds' baseline
    (``teammate_reset_fraction`` > 0, off by default): when the teammate's belief contradicts this
@@ -44,7 +45,8 @@ One step (:meth:`AugmentedMCL.update`, driven by :meth:`AMCLLocalizer.step`):
 5. **Resampling** (:meth:`AugmentedMCL.resample`): the size comes from KLD-sampling (Fox 2003):
    particles are drawn one at a time from the weighted set and counted into histogram bins
    (``bin_size_m`` x ``bin_size_m`` x ``bin_size_rad``); drawing stops once ``n >= n_chi(k)``
-   (:func:`kld_sample_count`, Wilson-Hilferty form of the chi-square quantile, ``k`` = bins hit),
+   (:func:`~swarmloc.agents.laser.amcl_sampling.kld_sample_count`, Wilson-Hilferty form of the
+   chi-square quantile, ``k`` = bins hit),
    clamped to ``[min_particles, max_particles]``. That count of particles is then drawn with
    low-variance (systematic) resampling (:func:`low_variance_resample`), and each one is replaced
    with probability ``max(0, 1 - w_fast / w_slow)`` by a random pose from free space.
@@ -64,26 +66,45 @@ Radio payload (msgpack map, about 1.1 KiB for the default 64 samples, at most
 std_rad], "odom": [delta_s_m, delta_phi_rad]}``; :func:`decode_belief` rejects anything else with
 ``ValueError`` naming the field. :meth:`AMCLLocalizer.step` never raises on a bad payload: it skips
 it and lists it in :attr:`AMCLLocalizer.rejected` (``(sender_id, error)`` of the last step).
+
+The particle-set arithmetic (KLD sample sizes, low-variance resampling, histogram bins and
+clusters, the recovery probability) is :mod:`swarmloc.agents.laser.amcl_sampling`; the belief
+summaries teammates broadcast, their codec and the teammate factor are
+:mod:`swarmloc.agents.laser.amcl_belief`.
 """
 
 from __future__ import annotations
 
 import difflib
 import functools
-import itertools
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, fields
 from statistics import NormalDist
 
-import msgpack
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
-from scipy.special import i0e, logsumexp
+from scipy.special import logsumexp
 
+from swarmloc.agents.laser.amcl_belief import (
+    MAX_SHARED_SAMPLES,
+    BeliefSummary,
+    decode_belief,
+    encode_belief,
+    mix_with_uniform,
+    poses_from_teammate,
+    teammate_log_density,
+)
+from swarmloc.agents.laser.amcl_sampling import (
+    TWO_PI,
+    _integer,
+    best_cluster_estimate,
+    cluster_labels,
+    histogram_bin_keys,
+    kld_sample_size,
+    low_variance_resample,
+    recovery_probability,
+)
 from swarmloc.agents.laser.localizer import (
-    MAX_RADIO_PAYLOAD_BYTES,
     LaserObservation,
     LocalizerSetup,
     RadioMessage,
@@ -91,12 +112,6 @@ from swarmloc.agents.laser.localizer import (
 )
 from swarmloc.world.laser.laser import unicycle_model, wrap_angle
 from swarmloc.world.laser.maps import SegmentMap, build_map, distance_to_walls, free_space_sample
-
-TWO_PI = 2.0 * math.pi
-
-#: Upper bound on the samples of one shared belief (16 bytes each: 16 KiB, within
-#: ``MAX_RADIO_PAYLOAD_BYTES``).
-MAX_SHARED_SAMPLES = 1024
 
 #: Upper bound on particle counts (memory: a few hundred bytes per particle and step).
 MAX_PARTICLES_LIMIT = 1_000_000
@@ -119,12 +134,6 @@ def _number(value, name: str) -> float:
     if not math.isfinite(number):
         raise ValueError(f"{name} must be finite, got {value!r}")
     return number
-
-
-def _integer(value, name: str) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise TypeError(f"{name} must be an integer, got {value!r}")
-    return int(value)
 
 
 @dataclass(frozen=True)
@@ -290,146 +299,8 @@ class AMCLParams:
 
 
 # --------------------------------------------------------------------------------------------
-# Resampling: KLD sample size and low-variance resampling
-# --------------------------------------------------------------------------------------------
-
-
-def kld_sample_count(k_bins, epsilon: float, z: float) -> np.ndarray:
-    """Fox 2003 (KLD-sampling): particles needed when ``k_bins`` histogram bins are
-    occupied, ``ceil((k-1)/(2 eps) * (1 - 2/(9(k-1)) + sqrt(2/(9(k-1))) z)^3)``, the Wilson-Hilferty
-    approximation of ``chi2_{k-1, 1-delta} / (2 eps)``; 0 for ``k <= 1``. ``z`` is the upper
-    ``1 - delta`` quantile of the standard normal. Not clamped (see :func:`kld_sample_size`)."""
-    k = np.asarray(k_bins, dtype=np.float64)
-    dof = np.maximum(k - 1.0, 1.0)
-    a = 2.0 / (9.0 * dof)
-    cube = (1.0 - a + np.sqrt(a) * z) ** 3
-    count = np.ceil(dof / (2.0 * epsilon) * cube)
-    return np.where(k > 1.0, count, 0.0).astype(np.int64)
-
-
-def kld_sample_size(k_bins, params: AMCLParams) -> np.ndarray:
-    """:func:`kld_sample_count` clamped to ``[min_particles, max_particles]``."""
-    count = kld_sample_count(k_bins, params.kld_epsilon, params.kld_z)
-    return np.clip(count, params.min_particles, params.max_particles)
-
-
-def low_variance_resample(weights: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
-    """Low-variance (systematic) resampling, Probabilistic Robotics table 4.4: ``n`` indices
-    into ``weights`` drawn with one random offset ``r ~ U[0, 1/n)`` and pointers ``r + m/n``.
-    Index ``i`` is drawn ``floor(n w_i)`` or ``ceil(n w_i)`` times (``w`` normalised)."""
-    w = np.asarray(weights, dtype=np.float64)
-    if w.ndim != 1 or w.size == 0:
-        raise ValueError(f"weights must be a non-empty 1-D array, got shape {w.shape}")
-    if not np.all(np.isfinite(w)) or np.any(w < 0.0) or not w.sum() > 0.0:
-        raise ValueError("weights must be finite, >= 0, with a positive sum")
-    n = _integer(n, "n")
-    if n < 0:
-        raise ValueError(f"n must be >= 0, got {n}")
-    cumulative = np.cumsum(w)
-    cumulative /= cumulative[-1]
-    pointers = (rng.random() + np.arange(n)) / n
-    index = np.searchsorted(cumulative, pointers, side="right")
-    return np.minimum(index, w.size - 1)
-
-
-# --------------------------------------------------------------------------------------------
-# Histogram bins and clusters
-# --------------------------------------------------------------------------------------------
-
-_BIN_BITS = 20
-_BIN_OFFSET = 1 << (_BIN_BITS - 1)
-_BIN_MASK = (1 << _BIN_BITS) - 1
-
-
-#: Half of the 26 neighbour offsets of a bin (those lexicographically after (0, 0, 0)): enough,
-#: since adjacency is symmetric.
-_HALF_NEIGHBOURS = tuple(o for o in itertools.product((-1, 0, 1), repeat=3) if o > (0, 0, 0))
-
-
-def _n_theta_bins(bin_size_rad: float) -> int:
-    return max(1, math.ceil(TWO_PI / bin_size_rad - 1e-9))
-
-
-def _bin_indices(particles: np.ndarray, bin_size_m: float, bin_size_rad: float):
-    n_theta = _n_theta_bins(bin_size_rad)
-    ix = np.floor(particles[:, 0] / bin_size_m)
-    iy = np.floor(particles[:, 1] / bin_size_m)
-    ix = np.clip(ix, -_BIN_OFFSET, _BIN_OFFSET - 2).astype(np.int64) + _BIN_OFFSET
-    iy = np.clip(iy, -_BIN_OFFSET, _BIN_OFFSET - 2).astype(np.int64) + _BIN_OFFSET
-    it = np.floor((wrap_angle(particles[:, 2]) + math.pi) / bin_size_rad).astype(np.int64)
-    it = np.clip(it, 0, n_theta - 1)
-    return ix, iy, it, n_theta
-
-
-def _bin_key(ix, iy, it):
-    return (ix << (2 * _BIN_BITS)) | (iy << _BIN_BITS) | it
-
-
-def histogram_bin_keys(particles: np.ndarray, bin_size_m: float, bin_size_rad: float) -> np.ndarray:
-    """One int64 key per particle naming its ``bin_size_m`` x ``bin_size_m`` x ``bin_size_rad``
-    histogram bin (equal keys: same bin)."""
-    ix, iy, it, _ = _bin_indices(particles, bin_size_m, bin_size_rad)
-    return _bin_key(ix, iy, it)
-
-
-def cluster_labels(particles: np.ndarray, bin_size_m: float, bin_size_rad: float) -> np.ndarray:
-    """Cluster label per particle ``(P,)``: connected components of the occupied histogram bins,
-    bins being adjacent when they differ by at most one in each of x, y and heading (heading
-    wraps around). Labels are ``0 .. n_clusters - 1``."""
-    ix, iy, it, n_theta = _bin_indices(particles, bin_size_m, bin_size_rad)
-    keys = _bin_key(ix, iy, it)
-    unique_keys, inverse = np.unique(keys, return_inverse=True)
-    n_bins = unique_keys.size
-    if n_bins == 0:
-        return np.zeros(0, dtype=np.int64)
-    ux = (unique_keys >> (2 * _BIN_BITS)) & _BIN_MASK
-    uy = (unique_keys >> _BIN_BITS) & _BIN_MASK
-    ut = unique_keys & _BIN_MASK
-    rows, cols = [], []
-    for dx, dy, dt in _HALF_NEIGHBOURS:
-        neighbour = _bin_key(ux + dx, uy + dy, (ut + dt) % n_theta)
-        pos = np.minimum(np.searchsorted(unique_keys, neighbour), n_bins - 1)
-        hit = unique_keys[pos] == neighbour
-        rows.append(np.flatnonzero(hit))
-        cols.append(pos[hit])
-    rows_all, cols_all = np.concatenate(rows), np.concatenate(cols)
-    graph = coo_matrix((np.ones(rows_all.size), (rows_all, cols_all)), shape=(n_bins, n_bins))
-    _, bin_label = connected_components(graph, directed=False)
-    return bin_label[inverse].astype(np.int64)
-
-
-def best_cluster_estimate(
-    particles: np.ndarray, weights: np.ndarray, labels: np.ndarray
-) -> tuple[np.ndarray, float]:
-    """Weighted mean pose of the heaviest cluster (circular mean of the headings) and that
-    cluster's share of the total weight."""
-    w = np.asarray(weights, dtype=np.float64)
-    cluster_weight = np.bincount(labels, weights=w)
-    best = int(np.argmax(cluster_weight))
-    member = labels == best
-    wm, pm = w[member], particles[member]
-    total = wm.sum()
-    if not total > 0.0:  # a cluster of zero weight: plain mean
-        wm, total = np.ones(pm.shape[0]), float(pm.shape[0])
-    mean = np.empty(3)
-    mean[0] = np.dot(wm, pm[:, 0]) / total
-    mean[1] = np.dot(wm, pm[:, 1]) / total
-    mean[2] = math.atan2(np.dot(wm, np.sin(pm[:, 2])), np.dot(wm, np.cos(pm[:, 2])))
-    share = float(cluster_weight[best] / cluster_weight.sum()) if cluster_weight.sum() > 0 else 1.0
-    return mean, share
-
-
-# --------------------------------------------------------------------------------------------
 # The sensor-independent filter core
 # --------------------------------------------------------------------------------------------
-
-
-def recovery_probability(log_w_slow: float | None, log_w_fast: float | None) -> float:
-    """Augmented_MCL's injection probability ``max(0, 1 - w_fast / w_slow)`` from the logs of the
-    two averages (0 before the first measurement)."""
-    if log_w_slow is None or log_w_fast is None or log_w_slow == -math.inf:
-        return 0.0
-    return max(0.0, 1.0 - math.exp(min(0.0, log_w_fast - log_w_slow)))
 
 
 class AugmentedMCL:
@@ -800,283 +671,6 @@ class LaserLikelihoodField:
         end_x = particles[:, 0:1] + cos_t * local_x - sin_t * local_y
         end_y = particles[:, 1:2] + sin_t * local_x + cos_t * local_y
         return self._log_p[self.field.flat_index(end_x, end_y)].sum(axis=1)
-
-
-# --------------------------------------------------------------------------------------------
-# Belief summaries on the radio, and the teammate factor
-# --------------------------------------------------------------------------------------------
-
-_PAYLOAD_KIND = "swarmloc.amcl.belief"
-_PAYLOAD_VERSION = 1
-_PAYLOAD_KEYS = {"kind", "v", "id", "step", "poses", "weights", "kernel", "odom"}
-
-
-@dataclass(frozen=True, eq=False)
-class BeliefSummary:
-    """A compact belief a robot broadcasts: ``K`` weighted pose samples ``(K, 3)`` with a kernel
-    (isotropic Gaussian of std ``kernel_std_m`` on position, von Mises of ``1 / kappa =
-    kernel_std_rad^2`` on heading), i.e. a mixture density; and the odometry of the step it was
-    taken after, so that a receiver one step later can move the samples forward (the radio
-    delivers at the next step)."""
-
-    robot_id: int
-    step: int
-    poses_m: np.ndarray
-    weights: np.ndarray
-    kernel_std_m: float
-    kernel_std_rad: float
-    odometry_delta_s_m: float = 0.0
-    odometry_delta_phi_rad: float = 0.0
-
-    def __post_init__(self) -> None:
-        for name in ("robot_id", "step"):
-            if isinstance(getattr(self, name), bool) or not isinstance(
-                getattr(self, name), (int, np.integer)
-            ):
-                raise ValueError(  # noqa: TRY004 -- a payload field: decoding fails with ValueError
-                    f"{name} must be an integer, got {getattr(self, name)!r}"
-                )
-        if not -(2**63) <= self.robot_id < 2**63 or not -(2**63) <= self.step < 2**63:
-            raise ValueError("robot_id and step must fit in 64 bits")
-        poses = np.array(self.poses_m, dtype=np.float64)
-        weights = np.array(self.weights, dtype=np.float64)
-        if poses.ndim != 2 or poses.shape[1] != 3 or not 1 <= poses.shape[0] <= MAX_SHARED_SAMPLES:
-            raise ValueError(
-                f"poses must have shape (K, 3) with 1 <= K <= {MAX_SHARED_SAMPLES}, got {poses.shape}"
-            )
-        if weights.shape != (poses.shape[0],):
-            raise ValueError(f"weights must have shape ({poses.shape[0]},), got {weights.shape}")
-        if not np.all(np.isfinite(poses)):
-            raise ValueError("poses must be finite")
-        if not np.all(np.isfinite(weights)) or np.any(weights < 0.0) or not weights.sum() > 0.0:
-            raise ValueError("weights must be finite, >= 0, with a positive sum")
-        for name in ("kernel_std_m", "kernel_std_rad"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, float, np.floating)):
-                raise ValueError(f"{name} must be a number, got {value!r}")  # noqa: TRY004
-            if not math.isfinite(value) or value <= 0.0:
-                raise ValueError(f"{name} must be finite and > 0, got {value!r}")
-        for name in ("odometry_delta_s_m", "odometry_delta_phi_rad"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, float, np.floating)):
-                raise ValueError(f"{name} must be a number, got {value!r}")  # noqa: TRY004
-            if not math.isfinite(value):
-                raise ValueError(f"{name} must be finite, got {value!r}")
-        poses.flags.writeable = False
-        weights.flags.writeable = False
-        object.__setattr__(self, "poses_m", poses)
-        object.__setattr__(self, "weights", weights)
-
-
-def encode_belief(summary: BeliefSummary) -> bytes:
-    """The msgpack payload of a :class:`BeliefSummary` (samples as little-endian float32)."""
-    if not isinstance(summary, BeliefSummary):
-        raise TypeError(f"expected a BeliefSummary, got {type(summary).__name__}")
-    wire = {
-        "kind": _PAYLOAD_KIND,
-        "v": _PAYLOAD_VERSION,
-        "id": int(summary.robot_id),
-        "step": int(summary.step),
-        "poses": summary.poses_m.astype("<f4").tobytes(),
-        "weights": summary.weights.astype("<f4").tobytes(),
-        "kernel": [float(summary.kernel_std_m), float(summary.kernel_std_rad)],
-        "odom": [float(summary.odometry_delta_s_m), float(summary.odometry_delta_phi_rad)],
-    }
-    data = msgpack.packb(wire, use_bin_type=True)
-    if len(data) > MAX_RADIO_PAYLOAD_BYTES:
-        raise ValueError(f"belief payload of {len(data)} bytes exceeds {MAX_RADIO_PAYLOAD_BYTES}")
-    return data
-
-
-def decode_belief(payload: bytes | bytearray | memoryview) -> BeliefSummary:
-    """Decode and validate a belief payload; ``ValueError`` naming the field if it is invalid."""
-    if not isinstance(payload, (bytes, bytearray, memoryview)):
-        raise TypeError(f"payload must be bytes, got {type(payload).__name__}")
-    size = payload.nbytes if isinstance(payload, memoryview) else len(payload)
-    if size > MAX_RADIO_PAYLOAD_BYTES:
-        raise ValueError(f"payload: {size} bytes exceeds {MAX_RADIO_PAYLOAD_BYTES}")
-    try:
-        wire = msgpack.unpackb(
-            payload,
-            raw=False,
-            use_list=True,
-            strict_map_key=True,
-            max_str_len=64,
-            max_bin_len=MAX_RADIO_PAYLOAD_BYTES,
-            max_array_len=8,
-            max_map_len=16,
-            max_ext_len=0,
-        )
-    except Exception as error:  # noqa: BLE001 -- msgpack raises many types, all mean "invalid"
-        raise ValueError(f"payload: not msgpack ({type(error).__name__})") from None
-    if not isinstance(wire, dict):
-        raise ValueError(f"payload: expected a msgpack map, got {type(wire).__name__}")  # noqa: TRY004
-    missing = _PAYLOAD_KEYS - wire.keys()
-    if missing:
-        raise ValueError(f"payload: missing field(s) {sorted(missing)}")
-    extra = wire.keys() - _PAYLOAD_KEYS
-    if extra:
-        raise ValueError(f"payload: unknown field(s) {sorted(map(str, extra))}")
-    if wire["kind"] != _PAYLOAD_KIND:
-        raise ValueError(f"kind: expected {_PAYLOAD_KIND!r}, got {wire['kind']!r}")
-    if type(wire["v"]) is not int or wire["v"] != _PAYLOAD_VERSION:
-        raise ValueError(f"v: expected version {_PAYLOAD_VERSION}, got {wire['v']!r}")
-    for name in ("id", "step"):
-        if type(wire[name]) is not int:
-            raise ValueError(f"{name}: expected an integer, got {type(wire[name]).__name__}")
-    for name in ("poses", "weights"):
-        if not isinstance(wire[name], bytes):
-            raise ValueError(f"{name}: expected bytes, got {type(wire[name]).__name__}")  # noqa: TRY004
-    if len(wire["poses"]) % 12 != 0:
-        raise ValueError(f"poses: {len(wire['poses'])} bytes is not a whole number of samples")
-    if len(wire["weights"]) % 4 != 0:
-        raise ValueError(f"weights: {len(wire['weights'])} bytes is not a whole number of floats")
-    for name in ("kernel", "odom"):
-        value = wire[name]
-        if (
-            not isinstance(value, list)
-            or len(value) != 2
-            or not all(type(v) in (int, float) for v in value)
-        ):
-            raise ValueError(f"{name}: expected two numbers, got {value!r}")
-    poses = np.frombuffer(wire["poses"], dtype="<f4").reshape(-1, 3)
-    weights = np.frombuffer(wire["weights"], dtype="<f4")
-    try:
-        return BeliefSummary(
-            robot_id=wire["id"],
-            step=wire["step"],
-            poses_m=poses,
-            weights=weights,
-            kernel_std_m=float(wire["kernel"][0]),
-            kernel_std_rad=float(wire["kernel"][1]),
-            odometry_delta_s_m=float(wire["odom"][0]),
-            odometry_delta_phi_rad=float(wire["odom"][1]),
-        )
-    except ValueError as error:
-        raise ValueError(f"payload: {error}") from None
-
-
-def teammate_log_density(
-    particles: np.ndarray,
-    sighting: Sighting,
-    summary: BeliefSummary,
-    distance_std_m: float,
-    orientation_std_rad: float,
-) -> np.ndarray:
-    """Log density of a seen teammate's belief at the pose each particle predicts for it ``(P,)``.
-
-    Particle ``(x, y, theta)`` and the sighting ``(d, b, h)`` predict the teammate at
-    ``(x + d cos(theta + b), y + d sin(theta + b), theta + h)``. The density is the mixture of the
-    summary's samples (moved forward by the summary's odometry), each a Gaussian in position whose
-    variance is the kernel's plus the sighting's noise (along the line of sight
-    ``distance_std^2``, across it ``(d orientation_std)^2``) times a von Mises density in heading
-    with ``1 / kappa = kernel_std_rad^2 + orientation_std^2`` (the wrapped Gaussian's usual
-    stand-in, and its cosine splits into outer products: no trigonometry over particle x sample
-    pairs). Fox et al. 2000 §3, the detection model: robot ``j``'s belief propagated through the
-    measured relative pose. ``-inf`` where the density underflows (far from every sample).
-    """
-    samples = unicycle_model(
-        summary.poses_m, summary.odometry_delta_s_m, summary.odometry_delta_phi_rad
-    )
-    weights = summary.weights / summary.weights.sum()
-    d = float(sighting.distance_m)
-    line = particles[:, 2] + float(sighting.bearing_rad)
-    ux, uy = np.cos(line)[:, None], np.sin(line)[:, None]
-    pred_x = particles[:, 0:1] + d * ux
-    pred_y = particles[:, 1:2] + d * uy
-    pred_heading = particles[:, 2:3] + float(sighting.relative_heading_rad)
-    var_along = summary.kernel_std_m**2 + distance_std_m**2
-    var_across = summary.kernel_std_m**2 + (d * orientation_std_rad) ** 2
-    kappa = 1.0 / (summary.kernel_std_rad**2 + orientation_std_rad**2)
-    sx, sy = samples[None, :, 0], samples[None, :, 1]  # (1, K)
-    # Offsets of the samples from the prediction, along and across the line of sight: (P, K).
-    along = sx * ux + sy * uy - (pred_x * ux + pred_y * uy)
-    across = sy * ux - sx * uy - (pred_y * ux - pred_x * uy)
-    # cos(theta_s - theta_pred) by the difference formula.
-    cos_dh = np.cos(samples[None, :, 2]) * np.cos(pred_heading)
-    cos_dh += np.sin(samples[None, :, 2]) * np.sin(pred_heading)
-    exponent = along * along
-    exponent *= -0.5 / var_along
-    across *= across
-    across *= -0.5 / var_across
-    exponent += across
-    cos_dh -= 1.0
-    cos_dh *= kappa
-    exponent += cos_dh  # <= 0 everywhere: exp cannot overflow
-    density = np.exp(exponent, out=exponent) @ weights
-    log_norm = (
-        -math.log(TWO_PI)
-        - 0.5 * math.log(var_along * var_across)
-        - math.log(TWO_PI * float(i0e(kappa)))
-    )
-    with np.errstate(divide="ignore"):
-        return np.log(density) + log_norm
-
-
-def teammate_log_factor(
-    particles: np.ndarray,
-    sighting: Sighting,
-    summary: BeliefSummary,
-    distance_std_m: float,
-    orientation_std_rad: float,
-    outlier_probability: float,
-    log_uniform_density: float,
-) -> np.ndarray:
-    """Log of the evidence a seen teammate's belief gives each particle ``(P,)``: the
-    :func:`teammate_log_density` mixed with a uniform density ``exp(log_uniform_density)`` with
-    weight ``outlier_probability``, so that a wrong teammate cannot erase the true hypothesis."""
-    log_density = teammate_log_density(
-        particles, sighting, summary, distance_std_m, orientation_std_rad
-    )
-    return mix_with_uniform(log_density, outlier_probability, log_uniform_density)
-
-
-def mix_with_uniform(
-    log_density: np.ndarray, outlier_probability: float, log_uniform_density: float
-) -> np.ndarray:
-    """``log((1 - eps) exp(log_density) + eps exp(log_uniform_density))``, ``eps`` the
-    outlier probability (``eps = 1``: the uniform density alone)."""
-    if outlier_probability >= 1.0:
-        return np.full(np.shape(log_density), float(log_uniform_density))
-    return np.logaddexp(
-        math.log1p(-outlier_probability) + log_density,
-        math.log(outlier_probability) + log_uniform_density,
-    )
-
-
-def poses_from_teammate(
-    summary: BeliefSummary,
-    sighting: Sighting,
-    n: int,
-    rng: np.random.Generator,
-    distance_std_m: float,
-    orientation_std_rad: float,
-) -> np.ndarray:
-    """``n`` poses ``(n, 3)`` of the *observing* robot drawn from a seen teammate's belief through
-    the inverse of the sighting: teammate pose ``s`` (a summary sample moved by its odometry, plus
-    kernel noise) and a noisy sighting ``(d, b, h)`` put the observer at heading
-    ``theta = theta_s - h`` and position ``s_xy - d (cos(theta + b), sin(theta + b))``.
-    Draws: one ``rng.choice`` of sample indices, one ``rng.normal`` of shape ``(n, 6)``."""
-    samples = unicycle_model(
-        summary.poses_m, summary.odometry_delta_s_m, summary.odometry_delta_phi_rad
-    )
-    weights = summary.weights / summary.weights.sum()
-    index = rng.choice(samples.shape[0], size=n, p=weights)
-    noise = rng.normal(0.0, 1.0, size=(n, 6))
-    teammate = samples[index]
-    teammate[:, :2] += noise[:, :2] * summary.kernel_std_m
-    teammate[:, 2] += noise[:, 2] * summary.kernel_std_rad
-    d = np.abs(float(sighting.distance_m) + noise[:, 3] * distance_std_m)
-    b = float(sighting.bearing_rad) + noise[:, 4] * orientation_std_rad
-    h = float(sighting.relative_heading_rad) + noise[:, 5] * orientation_std_rad
-    heading = wrap_angle(teammate[:, 2] - h)
-    return np.column_stack(
-        [
-            teammate[:, 0] - d * np.cos(heading + b),
-            teammate[:, 1] - d * np.sin(heading + b),
-            heading,
-        ]
-    )
 
 
 # --------------------------------------------------------------------------------------------
