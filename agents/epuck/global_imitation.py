@@ -158,7 +158,7 @@ def imitate_brain(brain, true_pose: np.ndarray, rng: np.random.Generator, medium
     """:func:`imitate_globally` on a :class:`~swarmloc.agents.epuck.foraging.ForagingBrain` holding the
     whole swarm, given the robots' true poses (the world's ``pose``); with its strategy's
     ``central == "boards"``, the transfer has the noise of the range-and-bearing ``medium``
-    (``world.medium.RabMedium``)."""
+    (``world.epuck.medium.RabMedium``)."""
     if brain.strategy.central == "boards":
         noise = (medium.range_noise_m, medium.bearing_noise_rad)
     else:

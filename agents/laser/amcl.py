@@ -12,7 +12,7 @@ One step (:meth:`AugmentedMCL.update`, driven by :meth:`AMCLLocalizer.step`):
 
 1. **Motion** (:meth:`AugmentedMCL.predict`): every particle moves by the odometry
    ``(delta_s, delta_phi)`` plus its own Gaussian noise, through the unicycle of eq. 3 of 002
-   (``world.laser.unicycle_model``). Noise standard deviations per step:
+   (``world.laser.laser.unicycle_model``). Noise standard deviations per step:
    ``speed_std_mps * dt_s`` and ``turn_rate_std_rad_s * dt_s`` of the setup, times
    ``AMCLParams.motion_noise_scale``.
 2. **Measurement** (:meth:`AugmentedMCL.correct`): weights times ``exp(log_likelihood(particles))``.
@@ -548,7 +548,7 @@ class AugmentedMCL:
 class DistanceField:
     """Distance to the nearest wall on a grid of cells: cell ``(i, j)`` covers
     ``[x0 + i res, x0 + (i+1) res) x [y0 + j res, y0 + (j+1) res)`` and holds the exact distance
-    from its centre (``world.maps.distance_to_walls``), capped at ``max_distance_m``. The grid
+    from its centre (``world.laser.maps.distance_to_walls``), capped at ``max_distance_m``. The grid
     extends ``max_distance_m`` beyond the map bounds, so every point off the grid is at least
     ``max_distance_m`` from any wall."""
 

@@ -35,7 +35,7 @@ import numpy as np
 
 
 class PinholeIntrinsics(Protocol):
-    """What the detector needs to know of the camera (``world.camera.CameraParams`` has it)."""
+    """What the detector needs to know of the camera (``world.vision.camera.CameraParams`` has it)."""
 
     width_px: int
     height_px: int

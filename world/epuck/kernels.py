@@ -215,7 +215,7 @@ def neighbour_pairs_into(x_m, y_m, cutoff_m, x0_m, y0_m, width_m, height_m, pair
 
 @njit(cache=True, error_model="numpy")
 def ir_readings(pose, r_m, range_m, width_m, height_m, cos_a, sin_a, noise_u, noise_lo, noise_span):
-    """IR proximity ``(N, S)`` of ``world.sensors.ir_proximity``: walls, then ordered robot pairs
+    """IR proximity ``(N, S)`` of ``world.epuck.sensors.ir_proximity``: walls, then ordered robot pairs
     within ``2 r + range``; multiplicative noise ``U(-f, f)`` from ``(N, S)`` uniforms in [0, 1)
     (see :func:`uniform`)."""
     cos_h, sin_h = heading_cos_sin(pose)
@@ -307,7 +307,7 @@ def _ir_readings(pose, cos_h, sin_h, r_m, range_m, width_m, height_m, cos_a, sin
 
 @njit(cache=True, inline="always", error_model="numpy")
 def _area_code(px, py, nest_x, nest_y, nest_r, prey_x, prey_y, prey_r):
-    """AREA_NEST (1), AREA_PREY (2) or AREA_NONE (0) of a point, as ``world.arena.area_at``."""
+    """AREA_NEST (1), AREA_PREY (2) or AREA_NONE (0) of a point, as ``world.epuck.arena.area_at``."""
     dx = px - nest_x
     dy = py - nest_y
     if dx * dx + dy * dy <= nest_r * nest_r:
@@ -321,7 +321,7 @@ def _area_code(px, py, nest_x, nest_y, nest_r, prey_x, prey_y, prey_r):
 
 @njit(cache=True, error_model="numpy")
 def ground_readings(pose, offsets, discs, reflectance, noise_u, noise_lo, noise_span):
-    """Ground readings ``(N, G)`` of ``world.sensors.ground_sensors`` (noise from uniforms as in
+    """Ground readings ``(N, G)`` of ``world.epuck.sensors.ground_sensors`` (noise from uniforms as in
     :func:`ir_readings`); ``discs`` = (nest x, y, r, prey x, y, r), ``reflectance`` indexed by
     area code."""
     cos_h, sin_h = heading_cos_sin(pose)
@@ -345,7 +345,7 @@ def _ground_readings(pose, cos_h, sin_h, offsets, discs, reflectance, noise_u, n
 
 @njit(cache=True, error_model="numpy")
 def area_codes(points, discs):
-    """``world.arena.area_at`` for points ``(N, 2)`` (int8 codes)."""
+    """``world.epuck.arena.area_at`` for points ``(N, 2)`` (int8 codes)."""
     n = points.shape[0]
     out = np.empty(n, np.int8)
     for i in range(n):
@@ -541,7 +541,7 @@ def move_bodies(pose, cmd, alive, vmax, tick_s, metres_per_step, slip_u, slip_lo
 
 @njit(cache=True, error_model="numpy")
 def separate_bodies(pos, radius_m, width_m, height_m, iterations):
-    """``world.arena.resolve_collisions`` with every body movable, in place on ``pos`` (N, 2).
+    """``world.epuck.arena.resolve_collisions`` with every body movable, in place on ``pos`` (N, 2).
 
     Returns False, leaving ``pos`` partly updated, if in some iteration a body overlaps three or
     more others: the numpy version sums those pushes in KD-tree order, which this kernel does not

@@ -183,7 +183,7 @@ def crossing(
 ) -> Survivors:
     """The first half of :func:`deliver`: candidates, loss (draw 1) and the decoding cap. The
     caller draws the measurement noises next (:func:`deliver`, or ``ForagingWorld.step``, which
-    draws them together with the odometry slip). ``pairs``: the ``world.kernels.neighbour_pairs``
+    draws them together with the odometry slip). ``pairs``: the ``world.epuck.kernels.neighbour_pairs``
     of these very poses within at least ``medium.range_m``, if the caller has them already."""
     pose = np.asarray(pose, dtype=float)
     if pose.ndim != 2 or pose.shape[1] != 3:

@@ -9,7 +9,7 @@
   the forage behaviour) and passed in as a mask.
 
 The world calls :meth:`ForagingMetrics.update` every tick with the *true* area of each body centre
-(``world.arena.area_at``), not what the robots believe. Tick ``k`` happens at time ``k * dt_s``.
+(``world.epuck.arena.area_at``), not what the robots believe. Tick ``k`` happens at time ``k * dt_s``.
 Vectorised over robots; no randomness.
 """
 
