@@ -7,7 +7,7 @@ in-process ES3 world (100 robots, the same bytes the world-server sends), then r
 fresh agent twice: back to back (warm), and after walking a 64 MB buffer before each tick to evict
 the CPU caches (cold). A "null" agent (decode, answer a fixed Act, encode) is the floor the brain
 adds to; "wire" is the agent as it runs (Sense bytes to Act bytes in one compiled call,
-agents/agent_tick.py), "brain" the same with the protocol codec around the compiled tick (the
+agents/epuck/agent_tick.py), "brain" the same with the protocol codec around the compiled tick (the
 path for Senses the compiled parser leaves to it), "reference" the brain stepped through
 ForagingBrain.step. Usage:
 
@@ -21,8 +21,8 @@ import time
 
 import numpy as np
 
-from swarmloc.agents.brains import ForagingAgent
-from swarmloc.agents.foraging import ForagingBrain, agent_rng
+from swarmloc.agents.epuck.agent import ForagingAgent
+from swarmloc.agents.epuck.foraging import ForagingBrain, agent_rng
 from swarmloc.deploy.scenario import load_scenario
 from swarmloc.protocol.errors import ErrorCounter
 from swarmloc.protocol.messages import EpuckAct, EpuckSense, decode, encode

@@ -1,4 +1,4 @@
-"""Speed of the AMCL-style particle filter (agents/amcl.py), the baseline of seeds 002 and 003.
+"""Speed of the AMCL-style particle filter (agents/laser/amcl.py), the baseline of seeds 002 and 003.
 
 Issue 4's target: at 5,000 particles, at least 20 updates per second on one core with the 18-beam
 laser of seed 003 (table I: L = 18, l = 8 m). One update is ``AMCLLocalizer.step``: motion
@@ -6,7 +6,7 @@ laser of seed 003 (table I: L = 18, l = 8 m). One update is ``AMCLLocalizer.step
 KLD-sized low-variance resampling with injection. The population is held at the given size
 (``AMCLParams.fixed``: min = max) so that KLD-sampling cannot shrink it.
 
-A robot wanders the office map (world/maps.py) for a precomputed trajectory; only the filter's
+A robot wanders the office map (world/laser/maps.py) for a precomputed trajectory; only the filter's
 steps are timed, in CPU time (``time.process_time``, robust to other load on the machine), over
 at least ``MIN_CPU_S`` of work after a warm-up. The collaborative line adds one teammate sighting
 with a 64-sample belief payload per step. BLAS and OpenMP are held to one thread.
@@ -27,14 +27,15 @@ import time
 
 import numpy as np
 
-from swarmloc.agents.amcl import AMCLLocalizer, AMCLParams, BeliefSummary, encode_belief
-from swarmloc.agents.localizer import (
+from swarmloc.agents.laser.amcl import AMCLLocalizer, AMCLParams
+from swarmloc.agents.laser.amcl_belief import BeliefSummary, encode_belief
+from swarmloc.agents.laser.localizer import (
     LaserObservation,
     LocalizerSetup,
     RadioMessage,
     Sighting,
 )
-from swarmloc.world.laser import (
+from swarmloc.world.laser.laser import (
     LaserParams,
     MotionNoise,
     RelativeNoise,
@@ -42,7 +43,7 @@ from swarmloc.world.laser import (
     scan,
     unicycle_step,
 )
-from swarmloc.world.maps import build_map, free_space_sample
+from swarmloc.world.laser.maps import build_map, free_space_sample
 
 PARTICLES = (500, 5000, 20000)
 MAP_NAME = "office"

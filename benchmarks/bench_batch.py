@@ -5,7 +5,7 @@ Prints, per size, the CPU time per tick (``time.process_time``: wall time is noi
 machine), robot-steps per second, and how that compares with real time (the e-puck controller
 runs at 10 Hz). Ticks are measured after a warm-up of the same length, so that the robots have
 left the dense start disc and the compiled kernels are loaded; they are the batch engine's
-(deploy/batch.py: CompiledTicks, as run_batch steps them). Usage:
+(deploy/lab/epuck/batch.py: CompiledTicks, as run_batch steps them). Usage:
 
     python benchmarks/bench_batch.py [--robots 10 100 1000 10000] [--ticks 200]
     python benchmarks/bench_batch.py --replication ES1 ES3   # whole seeded replications, CPU s
@@ -35,7 +35,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # one core, as the figure cl
 _FIRST_TICK = """
 import time
 t0 = time.perf_counter()
-from swarmloc.deploy.batch import run_batch
+from swarmloc.deploy.lab.epuck.batch import run_batch
 from swarmloc.deploy.scenario import load_scenario
 for strategy in ("SSGIKF", "DSGIFF", "NC", "SSIKF"):
     run_batch(load_scenario("ES1", [f"agent.strategy={strategy}", "world.duration_s=5"]))
@@ -57,8 +57,8 @@ def _scenario(n: int, ticks: int, strategy: str):
 
 
 def per_tick(args) -> None:
-    from swarmloc.deploy.batch import CompiledTicks, swarm_brain
-    from swarmloc.world.foraging import ForagingWorld
+    from swarmloc.deploy.lab.epuck.batch import CompiledTicks, swarm_brain
+    from swarmloc.world.epuck.foraging import ForagingWorld
 
     print(f"{'robots':>7} {'ms/tick':>9} {'robot-steps/s':>14} {'x real time':>12}   (CPU time, one core)")
     for n in args.robots:
@@ -75,7 +75,7 @@ def per_tick(args) -> None:
 
 
 def replications(args) -> None:
-    from swarmloc.deploy.batch import run_batch
+    from swarmloc.deploy.lab.epuck.batch import run_batch
     from swarmloc.deploy.scenario import load_scenario
 
     run_batch(load_scenario("ES1", [f"agent.strategy={args.strategy}", "world.duration_s=10"]))  # load kernels
@@ -90,8 +90,8 @@ def replications(args) -> None:
 
 
 def estimate(args) -> None:
-    from swarmloc.deploy.batch import run_batch
-    from swarmloc.deploy.experiment import load_spec, settings
+    from swarmloc.deploy.lab.epuck.batch import run_batch
+    from swarmloc.deploy.lab.experiment import load_spec, settings
     from swarmloc.deploy.scenario import load_scenario
 
     spec = load_spec(args.estimate)

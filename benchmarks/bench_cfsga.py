@@ -1,4 +1,4 @@
-"""Iterations per second of CFS-GA (agents/cfsga.py; seed 003, table I) on one core.
+"""Iterations per second of CFS-GA (agents/laser/cfsga.py; seed 003, table I) on one core.
 
 Issue 4 asks for at least 100 iterations/s per robot with 300 individuals and 18 beams. One
 iteration is a full :meth:`CFSGALocalizer.step`: kinematic update, raw fitness (300 x 18 rays cast
@@ -24,15 +24,15 @@ import time
 
 import numpy as np
 
-from swarmloc.agents.cfsga import CFSGALocalizer, CFSGAParams, encode_individuals
-from swarmloc.agents.localizer import (
+from swarmloc.agents.laser.cfsga import CFSGALocalizer, CFSGAParams, encode_individuals
+from swarmloc.agents.laser.localizer import (
     LaserObservation,
     LocalizerSetup,
     RadioMessage,
     Sighting,
 )
-from swarmloc.world.laser import LaserParams, MotionNoise, RelativeNoise, scan
-from swarmloc.world.maps import build_map
+from swarmloc.world.laser.laser import LaserParams, MotionNoise, RelativeNoise, scan
+from swarmloc.world.laser.maps import build_map
 
 POPULATIONS = (100, 300, 1000)
 N_OBSERVATIONS = 50

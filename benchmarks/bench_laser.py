@@ -1,6 +1,6 @@
-"""Timing of the laser observation model (world/laser.py ``cast_rays``, eq. 4 of seed 002).
+"""Timing of the laser observation model (world/laser/laser.py ``cast_rays``, eq. 4 of seed 002).
 
-Prints milliseconds per call of ``cast_rays`` on the office map (world/maps.py) for the batch
+Prints milliseconds per call of ``cast_rays`` on the office map (world/laser/maps.py) for the batch
 sizes the laser agents need: CFS-GA evaluates 300 individuals x 18 beams per iteration (table I of
 seed 003; >= 100 iterations/s per robot leaves 10 ms per iteration for everything), the particle
 filter 5,000 particles x 18 or 36 beams per update (>= 20 updates/s leaves 50 ms). Poses are
@@ -22,8 +22,8 @@ os.environ.setdefault("MKL_NUM_THREADS", "1")
 import numpy as np
 from _timing import median_ms
 
-from swarmloc.world.laser import cast_rays
-from swarmloc.world.maps import free_space_sample, office_map
+from swarmloc.world.laser.laser import cast_rays
+from swarmloc.world.laser.maps import free_space_sample, office_map
 
 CASES = ((300, 18), (5000, 18), (5000, 36))
 MAX_RANGE_M = 8.0

@@ -1,4 +1,4 @@
-"""Speed of the laser world alone (world/laser_world.py): steps per second for 3 and 30 robots.
+"""Speed of the laser world alone (world/laser/world.py): steps per second for 3 and 30 robots.
 
 One world step is what the runner and a world-server do per tick besides the robots' brains:
 the driver's pure-pursuit commands, noisy unicycle motion with the wall check, 18-beam scans,
@@ -20,7 +20,7 @@ os.environ.setdefault("MKL_NUM_THREADS", "1")
 
 import time
 
-from swarmloc.world.laser_world import LaserWorld, LaserWorldConfig
+from swarmloc.world.laser.world import LaserWorld, LaserWorldConfig
 
 STEPS = 400
 PAYLOAD = bytes(1024)

@@ -1,8 +1,8 @@
 """Lockstep over lossy links between network namespaces (issue 6): ticks/s and tick latency.
 
 For each loss rate, runs the same seeded lockstep scenario (ES1's robots in the lab's small arena,
-:func:`swarmloc.deploy.netns.lab_scenario`) with the router, the world and every agent in its own
-network namespace (:mod:`swarmloc.deploy.netns`), and prints what the world-server measured
+:func:`swarmloc.deploy.lab.netns.lab_scenario`) with the router, the world and every agent in its own
+network namespace (:mod:`swarmloc.deploy.lab.netns`), and prints what the world-server measured
 (its ``transport`` figures: ticks/s, tick p50/p99, late acts) and whether the metrics equal the
 batch engine's (the lossless run). Needs root and nftables. Usage:
 
@@ -26,9 +26,8 @@ import time
 import uuid
 from pathlib import Path
 
-from swarmloc.deploy.batch import run_batch
-from swarmloc.deploy.launch import supervised
-from swarmloc.deploy.netns import (
+from swarmloc.deploy.lab.epuck.batch import run_batch
+from swarmloc.deploy.lab.netns import (
     NetnsLab,
     lab_hosts,
     lab_scenario,
@@ -36,6 +35,7 @@ from swarmloc.deploy.netns import (
     start_lab_swarm,
     unavailable,
 )
+from swarmloc.deploy.launch import supervised
 
 
 def _wait_running(results_file: Path, timeout_s: float = 120.0) -> int:

@@ -24,8 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from swarmloc.deploy.mrclam import ReplayConfig, run_replay, score
-from swarmloc.world.mrclam import load_dataset
+from swarmloc.deploy.lab.replay.mrclam import ReplayConfig, run_replay, score
+from swarmloc.world.replay.mrclam import load_dataset
 
 DEFAULT = Path(__file__).resolve().parents[1].parent / "shared/data/mrclam/MRCLAM_Dataset6"
 TARGET_S = 60.0

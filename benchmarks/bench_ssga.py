@@ -1,4 +1,4 @@
-"""Speed of MR-SSGA and the simple GA (agents/ssga.py, agents/simple_ga.py; seed 002).
+"""Speed of MR-SSGA and the simple GA (agents/laser/ssga.py, agents/laser/simple_ga.py; seed 002).
 
 Prints iterations per second per robot (one ``step``: eq. 3 kinematic update, eq. 1 or eq. 2
 fitness through ``cast_rays``, reproduction, estimate) for populations of 50, 100 and 300 with the
@@ -32,15 +32,15 @@ import time
 
 import numpy as np
 
-from swarmloc.agents.localizer import (
+from swarmloc.agents.laser.localizer import (
     LaserObservation,
     LocalizerSetup,
     RadioMessage,
     Sighting,
 )
-from swarmloc.agents.simple_ga import SimpleGALocalizer
-from swarmloc.agents.ssga import SSGALocalizer, encode_scan_payload
-from swarmloc.world.laser import (
+from swarmloc.agents.laser.simple_ga import SimpleGALocalizer
+from swarmloc.agents.laser.ssga import SSGALocalizer, encode_scan_payload
+from swarmloc.world.laser.laser import (
     LaserParams,
     MotionNoise,
     RelativeNoise,
@@ -49,7 +49,7 @@ from swarmloc.world.laser import (
     unicycle_step,
     wrap_angle,
 )
-from swarmloc.world.maps import build_map
+from swarmloc.world.laser.maps import build_map
 
 MAP_NAME = "symmetric_rooms"
 POPULATIONS = (50, 100, 300)

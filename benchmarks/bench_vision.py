@@ -1,4 +1,4 @@
-"""Speed and accuracy of the vision pipeline: world/camera.py render + agents/vision.py detect.
+"""Speed and accuracy of the vision pipeline: world/vision/camera.py render + agents/vision/detection.py detect.
 
 Seed 004 §II (size-based distance with f = 190 px). Prints:
 
@@ -26,8 +26,8 @@ import time
 import cv2
 import numpy as np
 
-from swarmloc.agents.vision import detect_blobs
-from swarmloc.world.camera import CameraParams, make_object, project, render
+from swarmloc.agents.vision.detection import detect_blobs
+from swarmloc.world.vision.camera import CameraParams, make_object, project, render
 
 N_FRAMES = 500
 N_PLACEMENTS = 200

@@ -5,9 +5,9 @@ Prints, on one core:
 1. CPU milliseconds per frame (``time.process_time``, median over 500 frames; the scene of
    ``bench_vision.py``: a ball, two teammates, two rivals and a beacon): render + detect (the
    issue's budget: 5 ms), and the path an agent's frame takes: render + JPEG encode (world) +
-   decode + detect + the agent's detections (``swarmloc.agents.vision_agent``).
+   decode + detect + the agent's detections (``swarmloc.agents.vision.brain``).
    Also the CPU of one ``VisionBrain.step`` (the agent's whole tick) on experiment 1.
-2. ``swarmloc.deploy.vision_batch.detection_accuracy``: detection rate and median bearing and
+2. ``swarmloc.deploy.lab.vision.experiment.detection_accuracy``: detection rate and median bearing and
    distance errors of every object kind over distance, and of the ball and a teammate partly
    hidden by a nearer robot, against the rendered ground truth (markdown; the same table as in
    ``docs/vision/README.md``).
@@ -29,17 +29,17 @@ import time
 import cv2
 import numpy as np
 
-from swarmloc.agents.vision_agent import (
+from swarmloc.agents.vision.brain import (
     VisionAgentConfig,
     VisionBrain,
 )
-from swarmloc.deploy.vision_batch import (
+from swarmloc.deploy.lab.vision.experiment import (
     TIMING_SCENE,
     detection_accuracy,
     detection_table,
     frame_costs,
 )
-from swarmloc.world.vision_world import RobotStart, VisionWorld, VisionWorldConfig
+from swarmloc.world.vision.world import RobotStart, VisionWorld, VisionWorldConfig
 
 
 def brain_step_cost(n_ticks: int) -> float:

@@ -1,4 +1,4 @@
-"""Timing of the vectorised world models (world/arena.py, world/sensors.py, world/medium.py).
+"""Timing of the vectorised world models (world/epuck/arena.py, world/epuck/sensors.py, world/epuck/medium.py).
 
 Prints milliseconds per call of ir_proximity, ground_sensors, deliver and resolve_collisions for
 N = 100, 1000, 10000 e-pucks placed uniformly at random in a square arena at a density of about
@@ -15,9 +15,9 @@ import numpy as np
 from _timing import median_ms
 
 from swarmloc.protocol.epuck import EpuckBody
-from swarmloc.world.arena import Arena, Disc, area_at, resolve_collisions
-from swarmloc.world.medium import RabMedium, deliver
-from swarmloc.world.sensors import SensorParams, ground_sensors, ir_proximity
+from swarmloc.world.epuck.arena import Arena, Disc, area_at, resolve_collisions
+from swarmloc.world.epuck.medium import RabMedium, deliver
+from swarmloc.world.epuck.sensors import SensorParams, ground_sensors, ir_proximity
 
 AREA_PER_ROBOT_M2 = 0.05
 QUICK = {"min_time_s": 0.3, "min_calls": 5}  # measuring time per call

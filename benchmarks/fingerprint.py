@@ -12,7 +12,7 @@ import json
 
 
 def main() -> int:
-    from swarmloc.deploy.batch import run_batch
+    from swarmloc.deploy.lab.epuck.batch import run_batch
     from swarmloc.deploy.scenario import load_scenario
 
     digest = hashlib.sha256()

@@ -79,7 +79,7 @@ def _refuse_central(loaded) -> None:
     true poses (seed 001's global imitation): say so before anything starts."""
     if loaded.family != "foraging":
         return
-    from swarmloc.agents.social_odometry import STRATEGIES
+    from swarmloc.agents.epuck.social_odometry import STRATEGIES
 
     name = loaded.scenario.agent.strategy
     if STRATEGIES[name].central:
@@ -215,7 +215,7 @@ def main_agent(args) -> int:
 
 
 def main_batch(args) -> int:
-    from swarmloc.deploy.batch import run_batch
+    from swarmloc.deploy.lab.epuck.batch import run_batch
     from swarmloc.deploy.run import print_metrics
 
     scenario = load_from_args(args)
@@ -244,19 +244,19 @@ def main_run(args) -> int:
 
 
 def main_laser_experiment(args) -> int:
-    from swarmloc.deploy.laser_experiment import main_laser_experiment as run
+    from swarmloc.deploy.lab.laser.experiment import main_laser_experiment as run
 
     return run(args)
 
 
 def main_vision_experiment(args) -> int:
-    from swarmloc.deploy.vision_batch import main as run
+    from swarmloc.deploy.lab.vision.experiment import main as run
 
     return run(args)
 
 
 def main_mrclam(args) -> int:
-    from swarmloc.deploy.mrclam import main as run
+    from swarmloc.deploy.lab.replay.mrclam import main as run
 
     return run(args)
 
@@ -265,7 +265,9 @@ def main_mrclam(args) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from swarmloc.deploy import experiment, report, warm
+    from swarmloc.deploy import warm
+    from swarmloc.deploy.lab import experiment
+    from swarmloc.deploy.lab.epuck import report
 
     parser = argparse.ArgumentParser(prog="swarmloc", description=__doc__.splitlines()[0])
     parser.add_argument("-v", "--verbose", action="store_true", help="log more")
@@ -341,7 +343,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--report-only", action="store_true", help="write the report, run nothing")
     p.add_argument("--quiet", action="store_true", help="no progress output")
     p.set_defaults(func=main_laser_experiment)
-    from swarmloc.deploy import status
+    from swarmloc.deploy.observe import status
 
     status.add_parser(sub)
 
@@ -365,7 +367,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("mrclam", help="run a localizer on an MRCLAM data set (real robots' "
                                       "data) and score it against the ground truth")
-    from swarmloc.deploy.mrclam import add_arguments as mrclam_arguments
+    from swarmloc.deploy.lab.replay.mrclam import add_arguments as mrclam_arguments
 
     mrclam_arguments(p)
     p.set_defaults(func=main_mrclam)

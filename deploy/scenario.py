@@ -14,9 +14,9 @@ from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 
-from swarmloc.agents.foraging import AgentConfig
+from swarmloc.agents.epuck.foraging import AgentConfig
 from swarmloc.config import ConfigError, apply_overrides, from_dict, load_toml, to_dict
-from swarmloc.world.foraging import WorldConfig
+from swarmloc.world.epuck.foraging import WorldConfig
 
 DEFAULT_SCENARIO = "ES1"
 
@@ -101,9 +101,9 @@ def load_scenario(name_or_path: str = DEFAULT_SCENARIO, overrides: list[str] = (
 #: family -> "module:Class" of its scenario (``from_dict``/``to_dict``, validated, strict).
 FAMILY_SCENARIOS: dict[str, str] = {
     "foraging": "swarmloc.deploy.scenario:Scenario",
-    "laser": "swarmloc.deploy.laser_batch:LaserScenario",
-    "vision": "swarmloc.deploy.vision_batch:VisionScenario",
-    "replay": "swarmloc.world.replay_service:ReplayScenario",
+    "laser": "swarmloc.deploy.lab.laser.runner:LaserScenario",
+    "vision": "swarmloc.deploy.lab.vision.runner:VisionScenario",
+    "replay": "swarmloc.world.replay.service:ReplayScenario",
 }
 
 #: What the common command-line flags set in each family's scenario.

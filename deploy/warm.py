@@ -160,8 +160,8 @@ def _load_world_kernels() -> None:
 
 def _load_brain_kernels() -> None:
     """The brain's kernels and the agent's packed tick: building an agent loads them."""
-    from swarmloc.agents.brains import ForagingAgent
-    from swarmloc.agents.foraging import ForagingBrain, agent_rng
+    from swarmloc.agents.epuck.agent import ForagingAgent
+    from swarmloc.agents.epuck.foraging import ForagingBrain, agent_rng
     from swarmloc.deploy.scenario import load_any
 
     sc = load_any("ES1", {"seed": 1}, ["world.robots=1"]).scenario
@@ -189,10 +189,10 @@ def exercise(ticks: int = 40) -> None:
     """Call every compiled kernel as runs call it (compiling what the cache lacks): a served
     ES1 world answered by agents on both their paths, for every strategy a process runs, and a
     short batch run of every strategy."""
-    from swarmloc.agents.brains import ForagingAgent
-    from swarmloc.agents.foraging import ForagingBrain, agent_rng
-    from swarmloc.agents.social_odometry import STRATEGIES
-    from swarmloc.deploy.batch import run_batch
+    from swarmloc.agents.epuck.agent import ForagingAgent
+    from swarmloc.agents.epuck.foraging import ForagingBrain, agent_rng
+    from swarmloc.agents.epuck.social_odometry import STRATEGIES
+    from swarmloc.deploy.lab.epuck.batch import run_batch
     from swarmloc.deploy.scenario import load_any
     from swarmloc.protocol.errors import ErrorCounter
     from swarmloc.protocol.messages import EpuckAct, EpuckSense, decode

@@ -1,7 +1,7 @@
 """The contract between swarmloc processes: message types and their validating msgpack codec
-(:mod:`.messages`), the key expressions of a run (:mod:`.keys`), Zenoh session configuration from
-the conventional transport flags (:mod:`.session`), and the e-puck body both sides integrate
-(:mod:`.epuck`).
+(:mod:`.messages`; each robot family's Sense and Act are defined in :mod:`.family_messages`), the
+key expressions of a run (:mod:`.keys`), Zenoh session configuration from the conventional
+transport flags (:mod:`.session`), and the e-puck body both sides integrate (:mod:`.epuck`).
 
 The message codec and the keys do not import zenoh; only :mod:`.session` does, and it is not
 imported here, so ``import swarmloc.protocol`` stays light for pure code.

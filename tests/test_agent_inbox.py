@@ -5,8 +5,8 @@ from __future__ import annotations
 import msgpack
 import numpy as np
 
-from swarmloc.agents.brains import ForagingAgent
-from swarmloc.agents.foraging import ForagingBrain, agent_rng
+from swarmloc.agents.epuck.agent import ForagingAgent
+from swarmloc.agents.epuck.foraging import ForagingBrain, agent_rng
 from swarmloc.deploy.scenario import load_scenario
 from swarmloc.protocol.errors import ErrorCounter
 from swarmloc.protocol.messages import EpuckSense, RabMessage

@@ -1,4 +1,4 @@
-"""The packed agent tick (agents/agent_tick.py) against ForagingBrain.step, Act for Act.
+"""The packed agent tick (agents/epuck/agent_tick.py) against ForagingBrain.step, Act for Act.
 
 Two agents per robot, built alike from the same seed: one steps its brain as one compiled call
 (the agent process's path), the other through ForagingBrain.step (the reference, also the batch
@@ -16,10 +16,10 @@ import msgpack
 import numpy as np
 import pytest
 
-from swarmloc.agents.agent_tick import PackedForagingTick
-from swarmloc.agents.brains import ForagingAgent
-from swarmloc.agents.foraging import ForagingBrain, agent_rng
-from swarmloc.agents.social_odometry import STRATEGIES
+from swarmloc.agents.epuck.agent import ForagingAgent
+from swarmloc.agents.epuck.agent_tick import PackedForagingTick
+from swarmloc.agents.epuck.foraging import ForagingBrain, agent_rng
+from swarmloc.agents.epuck.social_odometry import STRATEGIES
 from swarmloc.deploy.scenario import load_any
 from swarmloc.protocol.epuck import STATE_KNOWS_BOTH
 from swarmloc.protocol.errors import ErrorCounter
@@ -127,7 +127,7 @@ def test_a_sense_the_wire_path_does_not_take_is_left_to_the_codec_untouched():
 
 def test_estimates_beyond_float32_still_give_an_act_on_every_path():
     """Why no Act of a brain fails to encode: the brain rounds what it sends to float32 itself
-    (agents/kernels.py: report_into), infinity where a value overflows, and the heard bearings it
+    (agents/epuck/kernels.py: report_into), infinity where a value overflows, and the heard bearings it
     sends back are ones the codec bounded to [-pi, pi]. Goals at 1e39 m (a state no run reaches)
     go out as infinite distances, the same bytes on the packed, wire and reference paths."""
     loaded = load_any("ES1", {"seed": 4}, ['agent.strategy="SSGIKF"', "world.robots=1"])

@@ -1,4 +1,4 @@
-"""Tests of the AMCL-style particle filter (agents/amcl.py; baseline of seeds 002 and 003).
+"""Tests of the AMCL-style particle filter (agents/laser/amcl.py; baseline of seeds 002 and 003).
 
 Expected values come from closed forms computed here independently (scipy's chi-square and normal
 quantiles, hand geometry on a box map, the Augmented_MCL averages by hand), statistics have stated
@@ -17,25 +17,24 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.stats import chi2, norm, vonmises
 
-from swarmloc.agents.amcl import (
+from swarmloc.agents.laser.amcl import AMCLLocalizer, AMCLParams, AugmentedMCL, build_distance_field
+from swarmloc.agents.laser.amcl_belief import (
     MAX_SHARED_SAMPLES,
-    AMCLLocalizer,
-    AMCLParams,
-    AugmentedMCL,
     BeliefSummary,
-    best_cluster_estimate,
-    build_distance_field,
-    cluster_labels,
     decode_belief,
     encode_belief,
+    poses_from_teammate,
+    teammate_log_factor,
+)
+from swarmloc.agents.laser.amcl_sampling import (
+    best_cluster_estimate,
+    cluster_labels,
     kld_sample_count,
     kld_sample_size,
     low_variance_resample,
-    poses_from_teammate,
     recovery_probability,
-    teammate_log_factor,
 )
-from swarmloc.agents.localizer import (
+from swarmloc.agents.laser.localizer import (
     MAX_RADIO_PAYLOAD_BYTES,
     LaserObservation,
     Localizer,
@@ -43,7 +42,7 @@ from swarmloc.agents.localizer import (
     RadioMessage,
     Sighting,
 )
-from swarmloc.world.laser import (
+from swarmloc.world.laser.laser import (
     LaserParams,
     MotionNoise,
     cast_rays,
@@ -51,7 +50,7 @@ from swarmloc.world.laser import (
     unicycle_model,
     unicycle_step,
 )
-from swarmloc.world.maps import SegmentMap, build_map, free_space_sample
+from swarmloc.world.laser.maps import SegmentMap, build_map, free_space_sample
 
 
 def box_map(width_m: float = 4.0, height_m: float = 2.0) -> SegmentMap:

@@ -14,7 +14,7 @@ import msgpack
 import numpy as np
 import pytest
 
-from swarmloc.agents.foraging import (
+from swarmloc.agents.epuck.foraging import (
     KNOWS_BOTH,
     NEST,
     PREY,
@@ -29,10 +29,10 @@ from swarmloc.agents.foraging import (
     classify_ground,
     on_path,
 )
-from swarmloc.deploy.batch import inbox_from, swarm_brain
+from swarmloc.deploy.lab.epuck.batch import inbox_from, swarm_brain
 from swarmloc.deploy.scenario import load_scenario
 from swarmloc.protocol.epuck import EpuckBody
-from swarmloc.world.foraging import ForagingWorld
+from swarmloc.world.epuck.foraging import ForagingWorld
 
 TICK_S = 0.1
 M_PER_STEP = math.pi * 0.041 / 1000  # one encoder step in metres (hand value)

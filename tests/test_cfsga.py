@@ -1,8 +1,8 @@
-"""Tests of CFS-GA (agents/cfsga.py; seed 003 §III-B, §IV, table I).
+"""Tests of CFS-GA (agents/laser/cfsga.py; seed 003 §III-B, §IV, table I).
 
 Operators against hand-computed values and exact geometry; the payload codec against malformed
-input; the whole localizer on maps of world/maps.py, driven by the laser world models of
-world/laser.py (fixed seeds, so deterministic; bounds stated with each test).
+input; the whole localizer on maps of world/laser/maps.py, driven by the laser world models of
+world/laser/laser.py (fixed seeds, so deterministic; bounds stated with each test).
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from swarmloc.agents.cfsga import (
+from swarmloc.agents.laser.cfsga import (
     MAX_SHARED_INDIVIDUALS,
     CFSGALocalizer,
     CFSGAParams,
@@ -31,7 +31,7 @@ from swarmloc.agents.cfsga import (
     tournament_select,
     virtual_population,
 )
-from swarmloc.agents.localizer import (
+from swarmloc.agents.laser.localizer import (
     MAX_RADIO_PAYLOAD_BYTES,
     LaserObservation,
     Localizer,
@@ -39,7 +39,7 @@ from swarmloc.agents.localizer import (
     RadioMessage,
     Sighting,
 )
-from swarmloc.world.laser import (
+from swarmloc.world.laser.laser import (
     LaserParams,
     MotionNoise,
     RelativeNoise,
@@ -48,7 +48,7 @@ from swarmloc.world.laser import (
     scan,
     unicycle_step,
 )
-from swarmloc.world.maps import SegmentMap, build_map, distance_to_walls, line_of_sight
+from swarmloc.world.laser.maps import SegmentMap, build_map, distance_to_walls, line_of_sight
 
 #: Controller period of the simulated runs: 5 Hz, so the odometry noise of table I
 #: (0.05 m/s, 0.1 rad/s) gives 1 cm and 0.02 rad per step.
@@ -356,7 +356,7 @@ def test_parent_pool_population_lets_discarded_individuals_breed():
 def _exact_moves_of_previous(previous, current_elites, delta_s, delta_phi):
     """For each elite, whether it is exactly a noise-free unicycle move of some previous
     individual."""
-    from swarmloc.world.laser import unicycle_model
+    from swarmloc.world.laser.laser import unicycle_model
 
     moved = unicycle_model(previous, delta_s, delta_phi)
     gaps = np.abs(current_elites[:, None, :] - moved[None, :, :]).max(axis=2).min(axis=1)

@@ -17,7 +17,7 @@ import math
 import numpy as np
 import pytest
 
-from swarmloc.agents.cooperative_vision import (
+from swarmloc.agents.vision.cooperative import (
     FOCAL_PX,
     Detection,
     consistent,
@@ -31,7 +31,7 @@ from swarmloc.agents.cooperative_vision import (
     teammate_from_common_object,
     triangulate,
 )
-from swarmloc.agents.potential_field import (
+from swarmloc.agents.vision.potential_field import (
     BALL,
     OBSTACLE,
     FieldParams,

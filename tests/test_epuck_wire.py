@@ -1,4 +1,4 @@
-"""The compiled e-puck wire fast path (agents/epuck_wire.py) against protocol.messages.
+"""The compiled e-puck wire fast path (agents/epuck/wire.py) against protocol.messages.
 
 ``decode``/``encode`` are the reference. ``parse_sense`` must accept every Sense a served world
 emits, with decode's values bit for bit, and whenever it accepts any other input decode must
@@ -20,7 +20,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from swarmloc.agents.epuck_wire import ACT_MAX_BYTES, N_PERCEPTS, encode_act, parse_sense
+from swarmloc.agents.epuck.wire import ACT_MAX_BYTES, N_PERCEPTS, encode_act, parse_sense
 from swarmloc.protocol.messages import (
     BEARING_TOLERANCE_RAD,
     MAX_RAB_PAYLOAD_BYTES,
@@ -121,9 +121,9 @@ def make_sense(n_received: int, robot_id: int = 7, tick: int = 300, final: bool 
 
 
 def _record(overrides: list[str], ticks: int) -> list[tuple[int, bytes]]:
-    from swarmloc.agents.brains import ForagingAgent
-    from swarmloc.agents.foraging import ForagingBrain, agent_rng
-    from swarmloc.deploy.netns import SMALL_ARENA
+    from swarmloc.agents.epuck.agent import ForagingAgent
+    from swarmloc.agents.epuck.foraging import ForagingBrain, agent_rng
+    from swarmloc.deploy.lab.netns import SMALL_ARENA
     from swarmloc.deploy.scenario import load_any
     from swarmloc.protocol.errors import ErrorCounter
     from swarmloc.world.service import served_world
@@ -462,7 +462,7 @@ def test_encode_act_property(tick, robot_id, wheel, payload, state, pose):
 
 _BOUNDSCHECK_SCRIPT = """
 import numpy as np
-from swarmloc.agents.epuck_wire import parse_sense
+from swarmloc.agents.epuck.wire import parse_sense
 data = bytes.fromhex(HEX)
 full = np.frombuffer(data, np.uint8)
 out = (np.zeros(13), np.zeros((16, 2)), np.zeros((16, 2), np.int64), np.zeros(16, np.int64),

@@ -10,8 +10,8 @@ import textwrap
 import pytest
 
 from swarmloc.config import ConfigError
-from swarmloc.deploy.batch import run_batch
-from swarmloc.deploy.experiment import (
+from swarmloc.deploy.lab.epuck.batch import run_batch
+from swarmloc.deploy.lab.experiment import (
     add_parser,
     load_spec,
     plan,

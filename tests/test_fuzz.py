@@ -47,9 +47,9 @@ import numpy as np
 import pytest
 import zenoh
 
-from swarmloc.deploy.batch import run_batch
+from swarmloc.deploy.lab.epuck.batch import run_batch
+from swarmloc.deploy.lab.netns import write_lease_config
 from swarmloc.deploy.launch import supervised
-from swarmloc.deploy.netns import write_lease_config
 from swarmloc.deploy.run import start_swarm
 from swarmloc.deploy.scenario import load_scenario
 from swarmloc.protocol.keys import Keys

@@ -7,16 +7,16 @@ import math
 import numpy as np
 import pytest
 
-from swarmloc.agents.global_imitation import (
+from swarmloc.agents.epuck.global_imitation import (
     imitate_globally,
     to_arena_frame,
     to_robot_frames,
     transfer,
 )
-from swarmloc.deploy.batch import run_batch, swarm_brain
 from swarmloc.deploy.cli import main
+from swarmloc.deploy.lab.epuck.batch import run_batch, swarm_brain
 from swarmloc.deploy.scenario import load_scenario
-from swarmloc.world.foraging import ForagingWorld
+from swarmloc.world.epuck.foraging import ForagingWorld
 
 
 def _state(n):
@@ -117,8 +117,8 @@ def test_in_the_batch_engine_every_robot_holds_the_same_arena_point_each_tick():
     sc = load_scenario("SO-3.0x3.0", ["world.robots=12", "agent.strategy=GLOBAL", "world.duration_s=400.0",
                                       "world.seed=4"])
     world, brain = ForagingWorld(sc.world), swarm_brain(sc)
-    from swarmloc.agents.foraging import on_path
-    from swarmloc.deploy.batch import inbox_from
+    from swarmloc.agents.epuck.foraging import on_path
+    from swarmloc.deploy.lab.epuck.batch import inbox_from
 
     sent, checked = None, 0
     while not world.done:
@@ -166,7 +166,7 @@ def test_processes_refuse_the_central_strategy_before_starting(command, capsys, 
 
 
 def test_world_service_refuses_the_central_strategy():
-    from swarmloc.world.service import _foraging
+    from swarmloc.world.epuck.service import _foraging
 
     with pytest.raises(ValueError, match="GLOBAL"):
         _foraging(load_scenario("ES1", ["agent.strategy=GLOBAL"]))

@@ -20,14 +20,14 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from swarmloc.deploy.batch import run_batch, run_ticks, swarm_brain
+from swarmloc.deploy.lab.epuck.batch import run_batch, run_ticks, swarm_brain
 from swarmloc.deploy.launch import ONE_THREAD_ZENOH_RUNTIME, supervised
 from swarmloc.deploy.run import start_swarm
 from swarmloc.deploy.scenario import load_scenario
 from swarmloc.protocol.keys import Keys
 from swarmloc.protocol.messages import EpuckAct, WorldState, decode, encode
 from swarmloc.protocol.session import open_session, session_config
-from swarmloc.world.foraging import ForagingWorld
+from swarmloc.world.epuck.foraging import ForagingWorld
 
 pytestmark = pytest.mark.integration
 

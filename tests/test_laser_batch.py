@@ -1,8 +1,8 @@
-"""Tests of the laser world (world/laser_world.py), the in-process runner (deploy/laser_batch.py)
-and the laser experiments and report (deploy/laser_experiment.py, deploy/laser_report.py).
+"""Tests of the laser world (world/laser/world.py), the in-process runner (deploy/lab/laser/runner.py)
+and the laser experiments and report (deploy/lab/laser/experiment.py, deploy/lab/laser/report.py).
 
 Expected values come from hand geometry (distances and walls of the built-in maps, see
-world/maps.py), from the laws of the noise (loss rate: binomial, tolerance stated), or from an
+world/laser/maps.py), from the laws of the noise (loss rate: binomial, tolerance stated), or from an
 independent computation (a dead-reckoning localizer written here, ``cast_rays``).
 """
 
@@ -16,10 +16,19 @@ import textwrap
 import numpy as np
 import pytest
 
-from swarmloc.agents.localizer import LaserObservation, LocalizerSetup
+from swarmloc.agents.laser.localizer import LaserObservation, LocalizerSetup
 from swarmloc.config import ConfigError
-from swarmloc.deploy.experiment import load_spec, plan
-from swarmloc.deploy.laser_batch import (
+from swarmloc.deploy.lab.experiment import load_spec, plan
+from swarmloc.deploy.lab.laser.experiment import columns, row, run_job
+from swarmloc.deploy.lab.laser.experiment import settings as laser_settings
+from swarmloc.deploy.lab.laser.report import (
+    curve_tail_indexes,
+    settle_index,
+    table3_indexes,
+    wilson_interval,
+    write_report,
+)
+from swarmloc.deploy.lab.laser.runner import (
     ALGORITHMS,
     AlgorithmConfig,
     LaserScenario,
@@ -32,17 +41,9 @@ from swarmloc.deploy.laser_batch import (
     summarize,
     symmetric_position_error,
 )
-from swarmloc.deploy.laser_experiment import columns, row, run_job
-from swarmloc.deploy.laser_experiment import settings as laser_settings
-from swarmloc.deploy.laser_report import (
-    curve_tail_indexes,
-    settle_index,
-    table3_indexes,
-    wilson_interval,
-    write_report,
-)
-from swarmloc.world.laser import LaserParams, cast_rays, unicycle_model
-from swarmloc.world.laser_world import (
+from swarmloc.world.laser.laser import LaserParams, cast_rays, unicycle_model
+from swarmloc.world.laser.maps import SegmentMap, build_map, distance_to_walls
+from swarmloc.world.laser.world import (
     DriverConfig,
     Kidnap,
     LaserWorld,
@@ -50,7 +51,6 @@ from swarmloc.world.laser_world import (
     RadioConfig,
     RobotPath,
 )
-from swarmloc.world.maps import SegmentMap, build_map, distance_to_walls
 
 # ---------------------------------------------------------------------------------------------
 # Helpers: still robots, a dead-reckoning localizer

@@ -12,7 +12,7 @@ import uuid
 
 import pytest
 
-from swarmloc.deploy.laser_batch import run_laser
+from swarmloc.deploy.lab.laser.runner import run_laser
 from swarmloc.deploy.launch import supervised
 from swarmloc.deploy.run import start_swarm
 from swarmloc.deploy.scenario import load_any

@@ -1,4 +1,4 @@
-"""Tests of the laser robots' world models (world/maps.py, world/laser.py; seeds 002 and 003).
+"""Tests of the laser robots' world models (world/laser/maps.py, world/laser/laser.py; seeds 002 and 003).
 
 Geometry against hand-computed values and a plain per-ray loop; noise against its law with stated
 tolerances (fixed seeds, so deterministic).
@@ -11,7 +11,7 @@ import math
 import numpy as np
 import pytest
 
-from swarmloc.world.laser import (
+from swarmloc.world.laser.laser import (
     LaserParams,
     MotionNoise,
     RelativeNoise,
@@ -22,7 +22,7 @@ from swarmloc.world.laser import (
     unicycle_step,
     visible_pairs,
 )
-from swarmloc.world.maps import (
+from swarmloc.world.laser.maps import (
     MAPS,
     MapRegistry,
     SegmentMap,

@@ -17,8 +17,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from swarmloc.agents.ekf import EkfLocalizer, position_update, range_bearing_update
-from swarmloc.agents.mrclam_localizers import (
+from swarmloc.agents.replay.ekf import EkfLocalizer, position_update, range_bearing_update
+from swarmloc.agents.replay.localizers import (
     CameraNoise,
     LandmarkSetup,
     MotionNoise,
@@ -27,15 +27,15 @@ from swarmloc.agents.mrclam_localizers import (
     decode_report,
     sgikf_fuse,
 )
-from swarmloc.deploy.mrclam import ReplayConfig, fit_camera, run_replay, score
-from swarmloc.world.mrclam import (
+from swarmloc.deploy.lab.replay.mrclam import ReplayConfig, fit_camera, run_replay, score
+from swarmloc.world.replay.mrclam import (
     MrclamFormatError,
     SyntheticConfig,
     load_dataset,
     synthesize,
     write_dataset,
 )
-from swarmloc.world.replay import LandmarkObservation, Message, ReplayWorld, mean_commands
+from swarmloc.world.replay.replay import LandmarkObservation, Message, ReplayWorld, mean_commands
 
 DATASET6 = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "mrclam" / "MRCLAM_Dataset6"
 needs_dataset6 = pytest.mark.skipif(

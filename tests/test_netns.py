@@ -1,6 +1,6 @@
 """Multi-host harness: router, world and agents in separate network namespaces, lossy links.
 
-Runs as root where ``ip`` and ``nft`` exist (see :func:`swarmloc.deploy.netns.unavailable`);
+Runs as root where ``ip`` and ``nft`` exist (see :func:`swarmloc.deploy.lab.netns.unavailable`);
 skipped with the reason otherwise. Every namespace a test makes is deleted when its lab is left
 (also on failure), every process it starts is stopped by id by its supervisor.
 
@@ -26,9 +26,8 @@ import uuid
 
 import pytest
 
-from swarmloc.deploy.batch import run_batch
-from swarmloc.deploy.launch import supervised
-from swarmloc.deploy.netns import (
+from swarmloc.deploy.lab.epuck.batch import run_batch
+from swarmloc.deploy.lab.netns import (
     NetnsLab,
     lab_hosts,
     lab_scenario,
@@ -36,6 +35,7 @@ from swarmloc.deploy.netns import (
     start_lab_swarm,
     unavailable,
 )
+from swarmloc.deploy.launch import supervised
 
 pytestmark = pytest.mark.integration
 

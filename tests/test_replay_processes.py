@@ -14,8 +14,8 @@ from pathlib import Path
 
 import pytest
 
+from swarmloc.deploy.lab.replay.mrclam import run_replay, score
 from swarmloc.deploy.launch import supervised
-from swarmloc.deploy.mrclam import run_replay, score
 from swarmloc.deploy.run import start_swarm
 from swarmloc.deploy.scenario import load_any
 

@@ -15,8 +15,8 @@ from pathlib import Path
 import pytest
 
 from swarmloc.config import ConfigError
-from swarmloc.deploy import report
-from swarmloc.deploy.report import add_parser, build_report, load_results
+from swarmloc.deploy.lab.epuck import claims, report
+from swarmloc.deploy.lab.epuck.report import add_parser, build_report, load_results
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 GRID = ["agent.strategy", "agent.beta", "world.robots", "world.odometry.slip_fraction"]
@@ -208,7 +208,7 @@ def test_values_a_group_fixes_tell_no_odometry_error_from_local_imitation(tmp_pa
         + arena("local-imitation", "SSGIFF", 1e-2, [60, 62, 64])
         + arena("no-odometry-error", "SSGIFF", 1e-2, [90, 91, 92]))))
     fixed = {("so-001", "no-odometry-error"): {"world.odometry.slip_fraction": 0.0}}
-    by_id = {c.id: c for c in report.compare_with_papers(rows, fixed=fixed)}
+    by_id = {c.id: c for c in claims.compare_with_papers(rows, fixed=fixed)}
     ceiling = by_id["001/no-odometry-ceiling/SO-4.0x4.0"]
     assert ceiling.ours.startswith("no odometry error 91; NC 21")
     assert "SSGIFF β=1e-2 62 (η = 0.68)" in ceiling.ours  # 62 / 91; not merged with 91
@@ -218,9 +218,9 @@ def test_values_a_group_fixes_tell_no_odometry_error_from_local_imitation(tmp_pa
     assert by_id["001/covariance-vs-best-beta/SO-4.0x4.0"].ours.startswith("SSIKF 52 vs SSGIFF")
 
     # Without the spec's values the two groups are still kept apart, labelled by group.
-    by_id = {c.id: c for c in report.compare_with_papers(rows, fixed={})}
+    by_id = {c.id: c for c in claims.compare_with_papers(rows, fixed={})}
     assert not by_id["001/no-odometry-ceiling/SO-4.0x4.0"].measured
-    table = report._Table(rows, {})
+    table = claims._Table(rows, {})
     labels = {table.variant(r).label() for r in table.rows}
     assert {"SSGIFF β=1e-2 [no-odometry-error]", "SSGIFF β=1e-2 [local-imitation]", "NC",
             "SSIKF"} <= labels
@@ -239,7 +239,7 @@ def test_a_numeric_grid_column_with_three_values_gets_a_line_figure(tmp_path):
                 r["setting"] += f"/slip={slip}"
             rows += part
     results = load_results(_write(tmp_path / "slip.csv", rows))
-    table = report._Table(results)
+    table = claims._Table(results)
     assert report.swept_parameters(table, results) == ["world.odometry.slip_fraction"]
     # two values only: no sweep
     assert report.swept_parameters(table, [r for r in results

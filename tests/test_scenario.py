@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from swarmloc.config import ConfigError, apply_overrides, from_dict, parse_value
-from swarmloc.deploy.batch import run_batch
 from swarmloc.deploy.cli import main
+from swarmloc.deploy.lab.epuck.batch import run_batch
 from swarmloc.deploy.scenario import Scenario, builtin_names, load_scenario
-from swarmloc.world.foraging import WorldConfig
+from swarmloc.world.epuck.foraging import WorldConfig
 
 SO_NAMES = ["SO-3.0x3.0", "SO-3.5x3.5", "SO-4.0x4.0", "SO-4.5x4.5"]
 
@@ -261,7 +261,7 @@ def test_bad_key_in_a_file_names_the_path(tmp_path):
 @pytest.fixture
 def no_run(monkeypatch):
     """Make any attempt to actually run a batch fail the test loudly."""
-    from swarmloc.deploy import batch
+    from swarmloc.deploy.lab.epuck import batch
 
     def boom(*args, **kwargs):
         raise AssertionError("the CLI ran a batch despite a bad configuration")

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from swarmloc.agents.foraging import AgentConfig, ForagingBrain, Inbox, agent_rng
-from swarmloc.agents.social_odometry import STRATEGIES
+from swarmloc.agents.epuck.foraging import AgentConfig, ForagingBrain, Inbox, agent_rng
+from swarmloc.agents.epuck.social_odometry import STRATEGIES
 from swarmloc.protocol.epuck import EpuckBody
 
 BODY = EpuckBody()
@@ -61,7 +61,7 @@ def test_p_is_the_spectral_norm_of_the_covariance_since_the_area(left, right):
 
 
 def test_fusion_scales_the_covariance_by_one_minus_the_gain():
-    from swarmloc.agents.foraging import SocialMessages
+    from swarmloc.agents.epuck.foraging import SocialMessages
 
     brain = _brain()
     brain.known[0, 0] = True

@@ -1,4 +1,4 @@
-"""The compiled payload codec (agents/social_codec.py) against SocialMessages.encode / decode.
+"""The compiled payload codec (agents/epuck/social_codec.py) against SocialMessages.encode / decode.
 
 The Python methods are the reference: ``encode_payload`` must give their bytes and
 ``decode_payload`` must accept exactly what ``SocialMessages.decode`` accepts, with the same row,
@@ -19,8 +19,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from swarmloc.agents.foraging import SocialMessages
-from swarmloc.agents.social_codec import (
+from swarmloc.agents.epuck.foraging import SocialMessages
+from swarmloc.agents.epuck.social_codec import (
     ENCODE_FLOAT_OVERFLOW,
     ENCODE_TOO_SMALL,
     PAYLOAD_MAX_BYTES,

@@ -18,7 +18,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from swarmloc.agents.social_odometry import (
+from swarmloc.agents.epuck.social_odometry import (
     STRATEGIES,
     fermi_gain,
     fuse,

@@ -1,4 +1,4 @@
-"""Tests of MR-SSGA and the simple GA (agents/ssga.py, agents/simple_ga.py; seed 002).
+"""Tests of MR-SSGA and the simple GA (agents/laser/ssga.py, agents/laser/simple_ga.py; seed 002).
 
 Networks against the counts the Watts-Strogatz and Barabási-Albert constructions fix; the mating
 rules of table 1 on hand-built tiny networks; eq. 1 and eq. 2 against ranges computed by hand in
@@ -17,7 +17,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from swarmloc.agents.localizer import (
+from swarmloc.agents.laser.localizer import (
     MAX_RADIO_PAYLOAD_BYTES,
     LaserObservation,
     Localizer,
@@ -25,14 +25,14 @@ from swarmloc.agents.localizer import (
     RadioMessage,
     Sighting,
 )
-from swarmloc.agents.simple_ga import (
+from swarmloc.agents.laser.simple_ga import (
     SimpleGALocalizer,
     SimpleGAParams,
     roulette_selection,
     simple_ga_reproduction,
     tournament_selection,
 )
-from swarmloc.agents.ssga import (
+from swarmloc.agents.laser.ssga import (
     FitnessModel,
     GeneticParams,
     SSGALocalizer,
@@ -47,7 +47,7 @@ from swarmloc.agents.ssga import (
     mutation_std,
     network_mating,
 )
-from swarmloc.world.laser import (
+from swarmloc.world.laser.laser import (
     LaserParams,
     MotionNoise,
     cast_rays,
@@ -56,7 +56,7 @@ from swarmloc.world.laser import (
     unicycle_step,
     wrap_angle,
 )
-from swarmloc.world.maps import SegmentMap, build_map
+from swarmloc.world.laser.maps import SegmentMap, build_map
 
 FOUR_BEAMS = np.arange(4) * (math.pi / 2.0)  # ahead, left, behind, right
 
@@ -447,8 +447,8 @@ def test_eq2_with_the_worlds_own_sightings_and_radio():
     replication agree: in a noise-free laser world, robot 0's individual kept at its true pose
     scores exactly (1 + 1) * peak at every step at which it holds a teammate's scan and the
     matching sighting, while both robots drive and turn in the corridor of `aliased_rooms`."""
-    from swarmloc.world.laser import RelativeNoise
-    from swarmloc.world.laser_world import (
+    from swarmloc.world.laser.laser import RelativeNoise
+    from swarmloc.world.laser.world import (
         DriverConfig,
         LaserWorld,
         LaserWorldConfig,

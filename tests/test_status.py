@@ -19,9 +19,7 @@ import uuid
 import pytest
 
 from swarmloc.deploy.launch import supervised
-from swarmloc.deploy.run import start_swarm
-from swarmloc.deploy.scenario import load_scenario
-from swarmloc.deploy.status import (
+from swarmloc.deploy.observe.status import (
     RunStatus,
     format_table,
     id_ranges,
@@ -29,6 +27,8 @@ from swarmloc.deploy.status import (
     selector,
     summarise,
 )
+from swarmloc.deploy.run import start_swarm
+from swarmloc.deploy.scenario import load_scenario
 
 # -- pure parts --------------------------------------------------------------------------------
 

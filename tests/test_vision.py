@@ -1,4 +1,4 @@
-"""Camera rendering (world/camera.py) and colour-blob detection (agents/vision.py), seed 004 §II.
+"""Camera rendering (world/vision/camera.py) and colour-blob detection (agents/vision/detection.py), seed 004 §II.
 
 Synthetic images with known answers: the renderer places objects at known bearings and
 distances; the detector must recover them.
@@ -12,8 +12,8 @@ import cv2
 import numpy as np
 import pytest
 
-from swarmloc.agents.vision import COLOUR_CLASSES, ColourClass, detect_blobs
-from swarmloc.world.camera import (
+from swarmloc.agents.vision.detection import COLOUR_CLASSES, ColourClass, detect_blobs
+from swarmloc.world.vision.camera import (
     COLOURS_BGR,
     OBJECT_KINDS,
     CameraParams,

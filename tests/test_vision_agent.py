@@ -1,4 +1,4 @@
-"""The vision brain (agents/vision_agent.py) and the in-process runner (deploy/vision_batch.py),
+"""The vision brain (agents/vision/brain.py) and the in-process runner (deploy/lab/vision/runner.py),
 seed 004 §II-IV.
 
 Expected values come from the geometry of the placed robots and objects (plain trigonometry in
@@ -19,8 +19,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from swarmloc.agents.cooperative_vision import Detection
-from swarmloc.agents.vision_agent import (
+from swarmloc.agents.vision.brain import (
     MAX_SHARE_BYTES,
     SharedFrame,
     VisionAgentConfig,
@@ -29,10 +28,13 @@ from swarmloc.agents.vision_agent import (
     decode_share,
     encode_share,
 )
-from swarmloc.deploy import vision_batch as vb
+from swarmloc.agents.vision.cooperative import Detection
 from swarmloc.deploy.cli import main as cli_main
-from swarmloc.world.camera import CameraParams, make_object, render
-from swarmloc.world.vision_world import (
+from swarmloc.deploy.lab.vision import experiment as vx
+from swarmloc.deploy.lab.vision import report as vr
+from swarmloc.deploy.lab.vision import runner as vb
+from swarmloc.world.vision.camera import CameraParams, make_object, render
+from swarmloc.world.vision.world import (
     FieldObject,
     RobotStart,
     VisionObservation,
@@ -377,7 +379,7 @@ def test_a_run_is_deterministic_and_counts_bad_input():
 def test_experiment_one_in_miniature():
     """Seed 004 §IV-A, one seed per mode: without sharing the robots collide (their straight
     paths to the ball converge to 0.2 m apart about 0.6 m before it), with sharing they do not."""
-    rows = vb.run_experiments(["vision-exp1"], runs=1, seed=4, workers=1)
+    rows = vx.run_experiments(["vision-exp1"], runs=1, seed=4, workers=1)
     assert len(rows) == 2
     on = [r for r in rows if r["sharing"]]
     off = [r for r in rows if not r["sharing"]]
@@ -385,14 +387,14 @@ def test_experiment_one_in_miniature():
     assert all(r["collisions"] >= 1 for r in off)
     assert all(r["teammate_err_median_m"] < 0.1 for r in on)
     assert all(r["teammate_err_median_m"] is None for r in off)
-    summary = {s["sharing"]: s for s in vb.summarize(rows)}
+    summary = {s["sharing"]: s for s in vx.summarize(rows)}
     assert summary[True]["runs_with_collision"] == 0
     assert summary[False]["runs_with_collision"] == 1
 
 
 def test_csv_round_trip_and_report(tmp_path):
     rows = [
-        dict.fromkeys(vb.COLUMNS)
+        dict.fromkeys(vx.COLUMNS)
         | {
             "experiment": 1,
             "scenario": "vision-exp1",
@@ -419,8 +421,8 @@ def test_csv_round_trip_and_report(tmp_path):
         }
         for s in (True, False)
     ]
-    vb.write_csv(rows, tmp_path / "rows.csv")
-    assert vb.read_csv(tmp_path / "rows.csv") == rows
+    vx.write_csv(rows, tmp_path / "rows.csv")
+    assert vx.read_csv(tmp_path / "rows.csv") == rows
     detection = {
         "distance": [("ball", "1-2 m", 3, 100.0, 100.0, 0.01, 0.5, 0.6)],
         "occlusion": [("ball", "0-25 %", 3, 50.0, 0.0, None, None, 90.0)],
@@ -429,7 +431,7 @@ def test_csv_round_trip_and_report(tmp_path):
     original = vb.load_vision_scenario
     vb.load_vision_scenario = lambda name, overrides=(): scenario  # short runs for the figures
     try:
-        readme = vb.write_report(
+        readme = vr.write_report(
             tmp_path / "out", rows, detection, ["swarmloc vision-experiment x"]
         )
     finally:
@@ -460,7 +462,7 @@ def test_cli(tmp_path, capsys):
         ]
     )
     assert code == 0
-    rows = vb.read_csv(out)
+    rows = vx.read_csv(out)
     assert len(rows) == 1 and rows[0]["sharing"] is False
     assert "| vision-exp2 | off | 1 |" in capsys.readouterr().out
     assert cli_main(["vision-experiment", "vision-exp9", "--runs", "1"]) == 2

@@ -14,13 +14,13 @@ import numpy as np
 import pytest
 
 from swarmloc.agents.brains import brain_from_welcome
+from swarmloc.deploy.lab.vision.runner import run_vision, world_config
 from swarmloc.deploy.launch import supervised
 from swarmloc.deploy.run import start_swarm
 from swarmloc.deploy.scenario import load_any
-from swarmloc.deploy.vision_batch import run_vision, world_config
 from swarmloc.protocol.errors import ErrorCounter
 from swarmloc.protocol.messages import VisionSense, Welcome
-from swarmloc.world.vision_world import VisionWorld
+from swarmloc.world.vision.world import VisionWorld
 
 pytestmark = pytest.mark.integration
 

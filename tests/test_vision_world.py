@@ -1,4 +1,4 @@
-"""The vision robots' world (world/vision_world.py, seed 004 §II-IV).
+"""The vision robots' world (world/vision/world.py, seed 004 §II-IV).
 
 Expected values come from hand kinematics (speeds times ticks), the module's stated noise model
 (per-tick relative errors of 5 %, heading drift 0.01 rad/sqrt(s)), and the camera geometry, never
@@ -13,9 +13,9 @@ import cv2
 import numpy as np
 import pytest
 
-from swarmloc.agents.vision import detect_blobs
-from swarmloc.world.camera import CameraParams
-from swarmloc.world.vision_world import (
+from swarmloc.agents.vision.detection import detect_blobs
+from swarmloc.world.vision.camera import CameraParams
+from swarmloc.world.vision.world import (
     CONTACT_MARGIN_M,
     FieldObject,
     OdometryNoise,

@@ -15,10 +15,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import optimize, stats
 
-from swarmloc.agents.foraging import NEST, PREY
-from swarmloc.agents.foraging import classify_ground as agent_classify_ground
+from swarmloc.agents.epuck.foraging import NEST, PREY
+from swarmloc.agents.epuck.foraging import classify_ground as agent_classify_ground
 from swarmloc.protocol.epuck import GROUND_SENSOR_OFFSETS_M, IR_SENSOR_ANGLES_RAD
-from swarmloc.world.arena import (
+from swarmloc.world.epuck.arena import (
     AREA_NEST,
     AREA_NONE,
     AREA_PREY,
@@ -31,9 +31,9 @@ from swarmloc.world.arena import (
     ground_reflectance,
     resolve_collisions,
 )
-from swarmloc.world.medium import Deliveries, RabMedium, deliver, loss_probability
-from swarmloc.world.metrics import ForagingMetrics
-from swarmloc.world.sensors import SensorParams, ground_sensors, ir_proximity
+from swarmloc.world.epuck.medium import Deliveries, RabMedium, deliver, loss_probability
+from swarmloc.world.epuck.metrics import ForagingMetrics
+from swarmloc.world.epuck.sensors import SensorParams, ground_sensors, ir_proximity
 
 R = 0.035  # e-puck body radius (m)
 NO_NOISE = SensorParams(ir_noise_fraction=0.0, ground_noise_fraction=0.0)

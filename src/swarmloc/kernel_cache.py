@@ -1,7 +1,7 @@
 """Where swarmloc's compiled (numba) kernels are cached.
 
 The e-puck world, brain and batch engine run in numba kernels compiled with ``cache=True``
-(``world/kernels.py``, ``agents/kernels.py``, ...). numba fixes where a function's cache lives when
+(``world/epuck/kernels.py``, ``agents/epuck/kernels.py``, ...). numba fixes where a function's cache lives when
 the function is decorated, that is when its module is imported, so the place is chosen here, by
 ``swarmloc/__init__.py``, before any kernel module is imported:
 

@@ -1,0 +1,139 @@
+"""Social odometry filters: NC, SGIKF and SGIFF, single and double (seed 000 §4, table 1).
+
+A robot keeps, for each goal area (nest, prey), an estimated location and ``p``, the inverse of its
+confidence: the distance travelled since it last left that area (seed 000 eq. 23). When it hears a
+neighbour that knows the same goal it fuses the two estimates with a scalar gain ``g``:
+
+- SGIKF: ``g = p_i / (p_i + p_j)`` (eq. 20), ``x_i <- (1-g) x_i + g x_j`` (eq. 21),
+  ``p_i <- (1-g) p_i`` (eq. 22);
+- SGIFF: ``g = 1 / (1 + exp(-beta (p_i - p_j)))`` (eq. 24, the Fermi rule of seed 001 eq. 8),
+  ``x_i <- (1-g) x_i + g x_j`` (eq. 25), ``p_i <- (1-g) p_i + g p_j`` (eq. 26).
+
+A robot that does not know a goal adopts the neighbour's estimate and confidence (eq. 14). "Single"
+strategies fuse only the goal the robot is heading to, "double" ones both (seed 000 §6.1).
+
+SSIKF/DSIKF are the SIKF of eq. 18-22, whose ``p`` is the spectral norm of the odometry
+covariance (eq. 19) instead of the distance travelled: seed 001's "covariance knowledge"
+comparison, where robots know their odometry error model.
+
+GLOBAL and GLOBAL_RB are seed 001's global imitation, by the two means the paper names: no
+messages over the 15 cm medium; each tick every robot takes the mean of the whole group's
+estimates, carried exactly by a central system (GLOBAL) or by long-range boards with the medium's
+range and bearing noise (GLOBAL_RB) (:mod:`swarmloc.agents.epuck.global_imitation`).
+
+The neighbour's estimate arrives in the neighbour's body frame; :func:`transform_received` turns it
+into the receiver's body frame from the range and the two bearings (eq. 27).
+
+All functions are pure and work on arrays with a leading message axis.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Strategy:
+    """One social odometry strategy of seed 000 §6.1 (and seed 001 §5)."""
+
+    name: str
+    communicates: bool
+    double: bool
+    gain: str  # "none", "kalman" or "fermi"
+    #: What ``p`` (inverse confidence) is: "distance" travelled since the area (eq. 23, the
+    #: SGI filters), or "covariance": the spectral norm of the odometry covariance propagated
+    #: with eq. 9-11 (eq. 19, the SIKF; seed 001's "covariance knowledge").
+    confidence: str = "distance"
+    #: Seed 001's global imitation (:mod:`swarmloc.agents.epuck.global_imitation`): every robot takes
+    #: the mean of the whole group's estimates each tick, shared by a central system that knows
+    #: every robot's true pose ("system": exact transfer) or by range-and-bearing boards of
+    #: unlimited range with the medium's noise ("boards"). Only the batch engine's world has the
+    #: true poses either needs. None: the robots' own 15 cm medium.
+    central: str | None = None
+
+
+#: The registry of strategies, by the names the papers use.
+STRATEGIES: dict[str, Strategy] = {
+    s.name: s
+    for s in (
+        Strategy("NC", communicates=False, double=False, gain="none"),
+        Strategy("SSGIKF", communicates=True, double=False, gain="kalman"),
+        Strategy("DSGIKF", communicates=True, double=True, gain="kalman"),
+        Strategy("SSGIFF", communicates=True, double=False, gain="fermi"),
+        Strategy("DSGIFF", communicates=True, double=True, gain="fermi"),
+        Strategy("SSIKF", communicates=True, double=False, gain="kalman", confidence="covariance"),
+        Strategy("DSIKF", communicates=True, double=True, gain="kalman", confidence="covariance"),
+        Strategy("GLOBAL", communicates=False, double=False, gain="none", central="system"),
+        Strategy("GLOBAL_RB", communicates=False, double=False, gain="none", central="boards"),
+    )
+}
+
+
+def kalman_gain(p_own: np.ndarray, p_other: np.ndarray) -> np.ndarray:
+    """Induced Kalman gain, seed 000 eq. 20. Two perfect estimates (p = 0 both) average."""
+    total = p_own + p_other
+    safe = np.where(total > 0.0, total, 1.0)
+    return np.where(total > 0.0, p_own / safe, 0.5)
+
+
+def fermi_gain(p_own: np.ndarray, p_other: np.ndarray, beta: float) -> np.ndarray:
+    """Fermi pairwise-comparison gain, seed 000 eq. 24 (seed 001 eq. 8).
+
+    ``p`` must be in the unit ``beta`` is expressed in (see ``AgentConfig.confidence_unit_m``).
+    """
+    z = np.clip(-beta * (p_own - p_other), -500.0, 500.0)
+    return 1.0 / (1.0 + np.exp(z))
+
+
+def sgikf_update(x_own, p_own, x_other, p_other):
+    """SGIKF correction, seed 000 eq. 20-22. ``x`` are ``(M, 2)`` locations, ``p`` ``(M,)``."""
+    g = kalman_gain(p_own, p_other)
+    x_new = (1.0 - g)[:, None] * x_own + g[:, None] * x_other
+    return x_new, (1.0 - g) * p_own
+
+
+def sgiff_update(x_own, p_own, x_other, p_other, beta: float):
+    """SGIFF correction, seed 000 eq. 24-26 (``p`` in the unit ``beta`` is expressed in)."""
+    g = fermi_gain(p_own, p_other, beta)
+    x_new = (1.0 - g)[:, None] * x_own + g[:, None] * x_other
+    return x_new, (1.0 - g) * p_own + g * p_other
+
+
+def fuse(strategy: Strategy, beta: float) -> Callable:
+    """The update function of a strategy, as ``f(x_own, p_own, x_other, p_other)``."""
+    if strategy.gain == "kalman":
+        return sgikf_update
+    if strategy.gain == "fermi":
+        return lambda x_own, p_own, x_other, p_other: sgiff_update(
+            x_own, p_own, x_other, p_other, beta
+        )
+    raise ValueError(f"strategy {strategy.name} does not fuse estimates")
+
+
+def transform_received(
+    range_m: np.ndarray,
+    bearing_receiver_rad: np.ndarray,
+    bearing_sender_rad: np.ndarray,
+    goal_distance_m: np.ndarray,
+    goal_angle_rad: np.ndarray,
+) -> np.ndarray:
+    """A goal seen by the sender, expressed in the receiver's body frame (seed 000 eq. 27).
+
+    - ``range_m``: lambda^ij, the range the receiver's board measured;
+    - ``bearing_receiver_rad``: gamma^j, the bearing of the sender measured by the receiver;
+    - ``bearing_sender_rad``: gamma^i, the bearing of the receiver measured by the sender;
+    - ``goal_distance_m``, ``goal_angle_rad``: dy^i and phi^i, the goal in the sender's frame.
+
+    The sender's direction relative to the communication beam is ``alpha = phi^i - gamma^i``; the
+    receiver turns it into ``phi^j = gamma^j + alpha - pi`` and adds the two vectors (eq. 27).
+    Returns ``(M, 2)`` points.
+    """
+    alpha = goal_angle_rad - bearing_sender_rad
+    phi_j = bearing_receiver_rad + alpha - np.pi
+    out = np.empty((np.shape(range_m)[0], 2))
+    out[:, 0] = range_m * np.cos(bearing_receiver_rad) + goal_distance_m * np.cos(phi_j)
+    out[:, 1] = range_m * np.sin(bearing_receiver_rad) + goal_distance_m * np.sin(phi_j)
+    return out

@@ -1,0 +1,469 @@
+"""The sample-based landmark localizers of the replay family: the particle filter and CFS-GA.
+
+Both keep a population of pose hypotheses, from the laser family's filters adapted to MRCLAM's
+landmark range-and-bearing readings (contract, noise, measurement models and teammate reports in
+:mod:`swarmloc.agents.replay.localizers`, whose registry builds them as ``pf`` and ``cfsga``):
+
+- :class:`ParticleFilterLocalizer`: the AMCL-style filter of ``agents/laser/amcl.py``
+  (:class:`~swarmloc.agents.laser.amcl.AugmentedMCL`: KLD sampling, recovery) with the landmark
+  log-likelihood plugged in; cooperative: each particle is reweighted by the density of the
+  teammate's broadcast belief at the place the particle and the relative measurement put it
+  (:func:`teammate_log_density`);
+- :class:`CfsgaLocalizer`: CFS-GA of ``agents/laser/cfsga.py`` (seed 003) with the landmark
+  fitness; cooperative: 003 §IV-B's virtual population and virtual niches.
+"""
+
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+from swarmloc.agents.replay.localizers import (
+    _NO_ROWS,
+    MAX_REPORT_SAMPLES,
+    TWO_PI,
+    CameraNoise,
+    LandmarkSetup,
+    RelativeReading,
+    TeammateReport,
+    _between,
+    _real,
+    calibrated,
+    check_observation,
+    decode_received,
+    landmark_fitness_terms,
+    landmark_log_likelihood,
+    polar_covariance,
+    position_fix,
+    relative_readings,
+    unicycle,
+    wrap_angle,
+)
+from swarmloc.world.replay.replay import LandmarkObservation
+
+# --------------------------------------------------------------------------------------------
+# Teammate evidence for particle sets and populations
+# --------------------------------------------------------------------------------------------
+
+
+def teammate_log_density(poses: np.ndarray, reading: RelativeReading, own_pose: np.ndarray,
+                         own_cov: np.ndarray, camera: CameraNoise,
+                         normalised: bool = True) -> np.ndarray:
+    """``(P,)`` log-density of a teammate's broadcast belief (a Gaussian: its pose estimate and
+    covariance) at the place each hypothesis ``(P, 3)`` and the relative reading put it:
+
+    - observer (this robot measured the teammate at ``(r, b)``): the teammate is predicted at
+      ``p + r (cos, sin)(theta + b)`` from each hypothesis; density ``N(mean_j, P_j + R)`` with
+      ``R`` the reading's covariance in x/y (taken along the estimate's line of sight);
+    - observed (the teammate measured this robot): density of the position fix
+      (:func:`position_fix`) at each hypothesis's position.
+
+    The collaborative particle filter of Fox, Burgard, Kruppa, Thrun (2000) with a Gaussian
+    belief summary, for range-and-bearing readings (no relative heading)."""
+    rep = reading.report
+    if reading.observer:
+        direction = poses[:, 2] + reading.bearing_rad
+        points = poses[:, :2] + reading.range_m * np.column_stack([np.cos(direction),
+                                                                   np.sin(direction)])
+        mean = rep.pose[:2]
+        cov = rep.covariance[:2, :2] + polar_covariance(
+            reading.range_m, float(own_pose[2]) + reading.bearing_rad,
+            float(camera.range_std(reading.range_m)), camera.bearing_std_rad)
+    else:
+        mean, cov = position_fix(reading, float(own_pose[2]), float(own_cov[2, 2]), camera)
+        points = poses[:, :2]
+    cov = cov + np.eye(2) * 1e-6
+    inv = np.linalg.inv(cov)
+    d = points - mean
+    maha = np.einsum("pi,ij,pj->p", d, inv, d)
+    if not normalised:
+        return -0.5 * maha
+    return -0.5 * maha - math.log(TWO_PI) - 0.5 * math.log(np.linalg.det(cov))
+
+
+def _mixture(log_density: np.ndarray, outlier_probability: float, log_uniform: float):
+    if outlier_probability <= 0.0:
+        return log_density
+    return np.logaddexp(math.log1p(-outlier_probability) + log_density,
+                        math.log(outlier_probability) + log_uniform)
+
+
+def _motion_growth(std_d: float, std_t: float) -> np.ndarray:
+    """What one tick of motion noise adds to a pose covariance (the distance error split over
+    x and y, the turn error on the heading): a cheap stand-in between two weighted-set
+    covariances."""
+    out = np.zeros((3, 3))
+    out[0, 0] = out[1, 1] = 0.5 * std_d * std_d
+    out[2, 2] = std_t * std_t
+    return out
+
+
+def _weighted_pose_covariance(poses: np.ndarray, weights: np.ndarray, mean: np.ndarray):
+    d = poses - mean
+    d[:, 2] = wrap_angle(d[:, 2])
+    return (d * weights[:, None]).T @ d + np.eye(3) * 1e-9
+
+
+class _Cooperation:
+    """What PF and GA share: decoding teammates' reports, the readings to use, and the report
+    to broadcast."""
+
+    def __init__(self, setup: LandmarkSetup):
+        self.setup = setup
+        self.rejected: tuple[tuple[int, ValueError], ...] = ()
+        self.out: bytes | None = None
+
+    def readings(self, obs: LandmarkObservation) -> list[RelativeReading]:
+        if not self.setup.cooperative:
+            return []
+        reports, rejected = decode_received(obs.received, self.setup.robot_id, obs.robot_ids)
+        self.rejected = tuple(rejected)
+        return relative_readings(obs, reports, self.setup.robot_id)
+
+    def publish(self, obs: LandmarkObservation, pose, cov, samples=None) -> None:
+        if self.setup.cooperative:
+            self.out = TeammateReport.build(self.setup.robot_id, obs.tick, pose, cov, obs,
+                                            samples).encode()
+
+
+@dataclass(frozen=True)
+class PfParams:
+    """The landmark particle filter's own parameters; every other key goes to
+    :class:`swarmloc.agents.laser.amcl.AMCLParams` (``min_particles``, ``recovery``, ...)."""
+
+    #: Resample when the effective sample size falls below this fraction of the particles
+    #: (``amcl`` resamples every ``resample_interval`` updates; with 0.02 s ticks and a few
+    #: readings per second the ESS rule spares needless resampling noise).
+    resample_ess_fraction: float = 0.5
+
+    def __post_init__(self):
+        if not 0.0 < _real(self.resample_ess_fraction, "resample_ess_fraction") <= 1.0:
+            raise ValueError(f"resample_ess_fraction must be in (0, 1], got {self.resample_ess_fraction}")
+
+
+#: Defaults of the AMCL core for MRCLAM (others are ``AMCLParams``' own): a tracking filter
+#: from a known pose needs far fewer particles than global localization in a laser map; and no
+#: random-particle recovery: one range-and-bearing reading fits a whole circle of poses, so a
+#: random particle on that circle outweighs the tracked set whenever the robot comes back from a
+#: gap in its readings (on Dataset 6 recovery turns 0.1-0.2 m errors into 1-3 m ones). Turn it
+#: on with ``recovery=true`` for a kidnapped-robot experiment.
+PF_AMCL_DEFAULTS = {"min_particles": 300, "max_particles": 2000, "bin_size_m": 0.25,
+                    "teammate_outlier_probability": 0.1, "recovery": False}
+
+
+class ParticleFilterLocalizer:
+    """The AMCL-style particle filter (``agents/laser/amcl.py``'s :class:`AugmentedMCL`) on landmark
+    readings: each tick the particles move with the odometry (per-step noise: the motion model
+    at MRCLAM's typical command, :attr:`MotionNoise.typical_v_mps`, since the AMCL core takes one
+    fixed noise); on a tick with readings, the weights are multiplied by the landmark likelihood
+    (:func:`landmark_log_likelihood`) and the teammates' evidence
+    (:func:`teammate_log_density`), the estimate is AMCL's best-cluster mean, and the set is
+    resampled (KLD-sized; recovery off by default, see :data:`PF_AMCL_DEFAULTS`) when its
+    effective size drops below
+    ``resample_ess_fraction``. In between, the estimate follows the odometry."""
+
+    def __init__(self, setup: LandmarkSetup, params: Mapping, rng: np.random.Generator):
+        from swarmloc.agents.laser.amcl import AMCLParams, AugmentedMCL
+
+        own = {k: v for k, v in params.items() if k in {f.name for f in fields(PfParams)}}
+        amcl = {**PF_AMCL_DEFAULTS, **{k: v for k, v in params.items() if k not in own}}
+        self.params = PfParams(**own)
+        self.amcl_params = AMCLParams.from_dict(amcl)
+        self.setup = setup
+        x0, y0, x1, y1 = setup.bounds_m
+        self._log_uniform_xy = -math.log((x1 - x0) * (y1 - y0))
+        # A misread: any range up to the area's diagonal, any bearing.
+        self._log_uniform_reading = -math.log(math.hypot(x1 - x0, y1 - y0) * TWO_PI)
+        low, high = np.array([x0, y0, -math.pi]), np.array([x1, y1, math.pi])
+
+        def sample_area(n: int, generator: np.random.Generator) -> np.ndarray:
+            return generator.uniform(low, high, size=(n, 3))
+
+        # Motion noise per second at the typical command; the per-tick std is this times
+        # sqrt(dt) (MotionNoise.tick_std is linear in sqrt(dt)).
+        self._per_second = setup.motion.tick_std(setup.motion.typical_v_mps,
+                                                 setup.motion.typical_omega_rad_s, 1.0)
+        n = self.amcl_params.max_particles
+        initial = setup.initial_pose + rng.normal(size=(n, 3)) * np.asarray(setup.initial_std)
+        initial[:, 2] = wrap_angle(initial[:, 2])
+        self._make = lambda motion_std, particles: AugmentedMCL(
+            self.amcl_params, rng, sample_area, motion_std, initial_particles=particles)
+        self.filter = None
+        self._dt = None
+        self._initial = initial
+        self._pose = setup.initial_pose.copy()
+        self._cov = setup.initial_covariance()
+        self.coop = _Cooperation(setup)
+        self.updates = 0
+
+    def _core(self, dt_s: float):
+        """The AMCL core; its per-step motion noise is fixed when it is built, so it is built
+        for the replay's tick length at the first step."""
+        if self.filter is None:
+            scale = math.sqrt(dt_s)
+            self.filter = self._make((self._per_second[0] * scale, self._per_second[1] * scale),
+                                     self._initial)
+            self._dt = dt_s
+        elif abs(dt_s - self._dt) > 1e-9:
+            raise ValueError(f"obs.odometry_dt_s: {dt_s} differs from the first tick's {self._dt}")
+        return self.filter
+
+    @property
+    def rejected(self):
+        return self.coop.rejected
+
+    def step(self, obs: LandmarkObservation) -> None:
+        setup = self.setup
+        check_observation(obs, setup.robot_id)
+        obs = calibrated(obs, setup.camera)
+        dt = obs.odometry_dt_s
+        core = self._core(dt)
+        distance, turn = obs.odometry_v_mps * dt, obs.odometry_omega_rad_s * dt
+        core.predict(distance, turn)
+        self._pose = unicycle(self._pose[None, :], distance, turn)[0]
+        std_d, std_t = setup.motion.tick_std(obs.odometry_v_mps, obs.odometry_omega_rad_s, dt)
+        self._cov = self._cov + _motion_growth(std_d, std_t)
+        readings = self.coop.readings(obs)
+        xy, known = setup.landmark_positions(obs.landmark_ids)
+        if known.any() or readings:
+            camera = setup.camera
+            if known.any():
+                lm_xy, rng_m = xy[known], obs.landmark_range_m[known]
+                bearing = obs.landmark_bearing_rad[known]
+                # One correction per reading: the recovery averages (w_slow, w_fast) then
+                # compare likelihoods of one reading each, not of frames with 1 or 4 readings.
+                for k in range(lm_xy.shape[0]):
+                    core.correct(lambda p, k=k: landmark_log_likelihood(
+                        p, lm_xy[k:k + 1], rng_m[k:k + 1], bearing[k:k + 1], camera,
+                        self._log_uniform_reading))
+            for reading in readings:
+                core.reweight(_mixture(
+                    teammate_log_density(core.particles, reading, self._pose, self._cov, camera),
+                    self.amcl_params.teammate_outlier_probability, self._log_uniform_xy))
+            estimate, _ = core.estimate_with_share()
+            self._pose = estimate
+            weights = core.weights
+            self._cov = _weighted_pose_covariance(core.particles, weights, estimate)
+            ess = 1.0 / float(np.sum(weights * weights))
+            if ess < self.params.resample_ess_fraction * core.n_particles:
+                core.resample()
+            self.updates += 1
+        self.coop.publish(obs, self._pose, self._cov)
+
+    def estimate(self) -> np.ndarray:
+        return self._pose.copy()
+
+    def outgoing(self) -> bytes | None:
+        return self.coop.out
+
+
+@dataclass(frozen=True)
+class CfsgaMrclamParams:
+    """The landmark CFS-GA's own parameters; every other key goes to
+    :class:`swarmloc.agents.laser.cfsga.CFSGAParams` (``population_size``, ...)."""
+
+    #: How many of its above-average individuals a robot broadcasts (fittest first).
+    shared_individuals: int = 64
+    #: Also score each individual by the teammates' readings (a term of the raw fitness's mean,
+    #: like one more landmark): ours; 003 §IV-B uses teammates only through the virtual niches.
+    teammate_fitness: bool = True
+    #: The raw fitness covers the landmark readings of the last ``window_s`` seconds, each
+    #: brought to the present by the odometry since (see :class:`CfsgaLocalizer`).
+    window_s: float = 1.0
+    #: "best": 003's best individual; "median": the population's coordinate-wise median
+    #: position, with the circular mean heading of the individuals within ``median_radius_m``.
+    estimate: str = "median"
+    median_radius_m: float = 0.5
+
+    def __post_init__(self):
+        if isinstance(self.shared_individuals, bool) or not isinstance(self.shared_individuals, int) \
+                or not 0 <= self.shared_individuals <= MAX_REPORT_SAMPLES:
+            raise ValueError(f"shared_individuals must be an integer in [0, {MAX_REPORT_SAMPLES}]")
+        if not isinstance(self.teammate_fitness, bool):
+            raise TypeError(f"teammate_fitness must be true or false, got {self.teammate_fitness!r}")
+        _real(self.window_s, "window_s")
+        _real(self.median_radius_m, "median_radius_m", positive=True)
+        if self.estimate not in ("best", "median"):
+            raise ValueError(f"estimate: expected 'best' or 'median', got {self.estimate!r}")
+
+
+#: CFS-GA core parameters for MRCLAM: table I of 003 (the core's defaults) with
+#: ``motion_diffusion`` on: each individual draws its own odometry noise, since the logged
+#: commands are not the motion and without it the population cannot follow the true pose's
+#: drift (first 300 s of Dataset 6: position RMSE 0.39 m without, 0.13 m with).
+CFSGA_TRACKING_DEFAULTS = {"motion_diffusion": True}
+
+
+class CfsgaLocalizer:
+    """CFS-GA (``agents/laser/cfsga.py``'s :class:`FitnessSharingGA`, seed 003) on landmark readings.
+
+    Each tick every individual moves with the odometry plus its own draw of the motion noise
+    (:meth:`MotionNoise.tick_std`). On a tick with landmark readings (or, cooperative, a reading
+    of or by a teammate) the GA runs one generation (003 §IV-A):
+
+    - **raw fitness** (:func:`landmark_fitness_terms`, 003's mean over the measurements of a
+      Gaussian of each residual): 003 scores a pose by a whole laser scan; one camera frame holds one to four
+      landmark readings, which leave a pose undetermined (one reading fits a circle of poses), so
+      the fitness covers the readings of the last ``window_s`` seconds. Each is predicted from
+      the individual's pose at the time of the reading: its present pose moved back by the
+      odometry since (dead reckoning over at most ``window_s``), with the reading's noise grown
+      by the motion noise of that interval. With ``teammate_fitness`` the teammates' readings of
+      this tick (:func:`teammate_log_density`) are further terms of the mean;
+    - shared fitness, tournaments, elitism, aging: the core, unchanged;
+    - **cooperative**: the virtual population of 003 §IV-B: the teammates' broadcast
+      above-average individuals turned into hypotheses of this robot's position by the reading
+      between the two robots (``R(P_b, Delta)``; MRCLAM measures no relative heading, so a
+      virtual individual gets this robot's estimated heading, which the niche count, a distance
+      between positions, does not use).
+
+    The estimate is the best individual (raw fitness times the aging factor)."""
+
+    def __init__(self, setup: LandmarkSetup, params: Mapping, rng: np.random.Generator):
+        from swarmloc.agents.laser.cfsga import CFSGAParams, FitnessSharingGA, box_sampler
+
+        own_names = {f.name for f in fields(CfsgaMrclamParams)}
+        own = {k: v for k, v in params.items() if k in own_names}
+        core = {**CFSGA_TRACKING_DEFAULTS,
+                **{k: v for k, v in params.items() if k not in own_names}}
+        self.params = CfsgaMrclamParams(**own)
+        self.ga_params = CFSGAParams.from_dict(core)
+        self.setup = setup
+        x0, y0, x1, y1 = setup.bounds_m
+        diagonal = math.hypot(x1 - x0, y1 - y0)
+        m = self.ga_params.population_size
+        initial = setup.initial_pose + rng.normal(size=(m, 3)) * np.asarray(setup.initial_std)
+        initial[:, 2] = wrap_angle(initial[:, 2])
+        self.ga = FitnessSharingGA(self.ga_params, self.ga_params.niche_radius_fraction * diagonal,
+                                   box_sampler(setup.bounds_m), rng, initial_population=initial)
+        self._pose = setup.initial_pose.copy()
+        self._cov = setup.initial_covariance()
+        self._shared = _NO_ROWS
+        self.coop = _Cooperation(setup)
+        self.generations = 0
+        self.virtual_size = 0
+        # The reading window: odometry pose (dead reckoning in its own frame) and time of each
+        # reading, with the landmark, range and bearing.
+        self._odometry_pose = np.zeros(3)
+        self._odometry_var = np.zeros(2)  # accumulated distance and turn variances
+        self._time_s = 0.0
+        self._window: list[tuple] = []
+
+    @property
+    def rejected(self):
+        return self.coop.rejected
+
+    def _virtual(self, readings: Sequence[RelativeReading]) -> np.ndarray | None:
+        parts = []
+        heading = float(self._pose[2])
+        for reading in readings:
+            samples = reading.report.samples
+            if not samples.shape[0]:
+                continue
+            if reading.observer:
+                direction = heading + reading.bearing_rad
+                xy = samples[:, :2] - reading.range_m * np.array([math.cos(direction),
+                                                                  math.sin(direction)])
+            else:
+                direction = samples[:, 2] + reading.bearing_rad
+                xy = samples[:, :2] + reading.range_m * np.column_stack([np.cos(direction),
+                                                                         np.sin(direction)])
+            parts.append(np.column_stack([xy, np.full(xy.shape[0], heading)]))
+        return np.concatenate(parts) if parts else None
+
+    def _window_fitness(self):
+        """``(raw fitness terms (P,) summed, number of terms)`` of the readings in the window,
+        as a function of the present poses."""
+        entries = self._window
+        if not entries:
+            return None, 0
+        odo = np.array([e[0] for e in entries])
+        var = np.array([e[1] for e in entries])
+        lm_xy = np.concatenate([e[2] for e in entries])
+        rng_m = np.concatenate([e[3] for e in entries])
+        bearing = np.concatenate([e[4] for e in entries])
+        counts = [e[2].shape[0] for e in entries]
+        delta = np.repeat(_between(self._odometry_pose, odo), counts, axis=0)
+        extra = np.repeat(self._odometry_var[None, :] - var, counts, axis=0)
+        camera = self.setup.camera
+        range_std = np.sqrt(camera.range_std(rng_m) ** 2 + extra[:, 0])
+        bearing_std = np.sqrt(camera.bearing_std_rad**2 + extra[:, 1])
+
+        def terms(poses: np.ndarray) -> np.ndarray:
+            return landmark_fitness_terms(poses, delta, lm_xy, rng_m, bearing, range_std,
+                                          bearing_std)
+
+        return terms, rng_m.size
+
+    def step(self, obs: LandmarkObservation) -> None:
+        setup = self.setup
+        check_observation(obs, setup.robot_id)
+        obs = calibrated(obs, setup.camera)
+        dt = obs.odometry_dt_s
+        distance, turn = obs.odometry_v_mps * dt, obs.odometry_omega_rad_s * dt
+        std_d, std_t = setup.motion.tick_std(obs.odometry_v_mps, obs.odometry_omega_rad_s, dt)
+        diffusion = 1.0 if self.ga_params.motion_diffusion else 0.0
+        self.ga.kinematic_update(distance, turn, std_d * diffusion, std_t * diffusion)
+        if self._shared.shape[0]:
+            self._shared = unicycle(self._shared, distance, turn)
+        self._cov = self._cov + _motion_growth(std_d, std_t)
+        self._odometry_pose = unicycle(self._odometry_pose[None, :], distance, turn)[0]
+        self._odometry_var = self._odometry_var + np.array([std_d * std_d, std_t * std_t])
+        self._time_s = obs.time_s
+        horizon = self._time_s - self.params.window_s
+        self._window = [e for e in self._window if e[5] > horizon]
+        readings = self.coop.readings(obs)
+        xy, known = setup.landmark_positions(obs.landmark_ids)
+        if known.any():
+            self._window.append((self._odometry_pose.copy(), self._odometry_var.copy(), xy[known],
+                                 obs.landmark_range_m[known], obs.landmark_bearing_rad[known],
+                                 self._time_s))
+        use_teammates = bool(readings) and self.params.teammate_fitness
+        if known.any() or use_teammates:
+            camera = setup.camera
+            window_terms, n_window = self._window_fitness()
+            pose, cov = self._pose, self._cov
+            n_terms = n_window + (len(readings) if use_teammates else 0)
+
+            def raw_fitness(poses: np.ndarray) -> np.ndarray:
+                total = window_terms(poses) if n_window else np.zeros(poses.shape[0])
+                if use_teammates:
+                    for reading in readings:
+                        total = total + np.exp(teammate_log_density(poses, reading, pose, cov,
+                                                                    camera, normalised=False))
+                return total / n_terms
+
+            self.ga.evaluate(raw_fitness)
+            if setup.cooperative and self.params.shared_individuals:
+                self._shared = self.ga.above_average(self.params.shared_individuals)
+            virtual = self._virtual(readings)
+            self.virtual_size = 0 if virtual is None else int(virtual.shape[0])
+            self.ga.evolve(virtual)
+            self.generations += 1
+            population = self.ga.population
+            self._pose = self._population_estimate()
+            self._cov = _weighted_pose_covariance(
+                population, np.full(population.shape[0], 1.0 / population.shape[0]), self._pose)
+        else:
+            self._pose = unicycle(self._pose[None, :], distance, turn)[0]
+        self.coop.publish(obs, self._pose, self._cov, self._shared)
+
+    def _population_estimate(self) -> np.ndarray:
+        if self.params.estimate == "best":
+            return self.ga.best_pose
+        population = self.ga.population
+        xy = np.median(population[:, :2], axis=0)
+        near = np.hypot(population[:, 0] - xy[0], population[:, 1] - xy[1]) \
+            < self.params.median_radius_m
+        headings = population[near, 2] if near.any() else population[:, 2]
+        heading = math.atan2(np.sin(headings).mean(), np.cos(headings).mean())
+        return np.array([xy[0], xy[1], heading])
+
+    def estimate(self) -> np.ndarray:
+        return self._pose.copy()
+
+    def outgoing(self) -> bytes | None:
+        return self.coop.out

@@ -1,0 +1,910 @@
+"""The vision robot's brain: colour blobs, shared detections, cooperative localization, PFA.
+
+Seed 004 (``seeds/004_e71d8ee95e0baa56.txt``: Peula et al., "Explicit coordinated localization
+using common visual objects"), §II-IV, eq. 1-5.
+:class:`VisionBrain` is one robot's brain, a pure model (no Zenoh, no clock, no global random
+state) that runs inside an agent process or inside the in-process runner
+(``swarmloc.deploy.lab.vision.runner``). Each tick (:meth:`VisionBrain.step`):
+
+1. **Image** (§III, colour events): the encoded camera frame is decoded (:func:`decode_image`: a
+   payload that does not decode, or decodes to the wrong size, raises ``ValueError`` naming the
+   problem before any state changes; the shell counts it and goes on) and its colour blobs are
+   found with ``swarmloc.agents.vision.detection.detect_blobs`` (HSV thresholds, morphology, components).
+   Each blob becomes a :class:`~swarmloc.agents.vision.cooperative.Detection`: colour, bearing in
+   the body frame (head pan + angle off the optical axis), apparent size and size-based distance.
+   Cylinders cut by the left or right image edge are dropped (their width, hence distance and
+   bearing, are wrong); a ball cut by the image edge keeps the larger of its equal-area radius and
+   half its width (a ball cut at the bottom keeps its full width).
+2. **Telepathy** (§III): :meth:`VisionBrain.share` packs this frame's detections, with the head
+   angle ("the angle of the neck"), the time, and the robot's odometry pose, into a msgpack
+   payload (:func:`encode_share`); :meth:`VisionBrain.receive` decodes a teammate's payload with
+   :func:`decode_share`, which rejects impossible values with ``ValueError`` naming the field:
+   NaN or infinite numbers, a negative or zero size or distance, a bearing outside the camera's
+   field of view, a time in the future, a sender that is not who it claims to be, an unknown
+   colour. Detections older than the window (2 s, §III) are dropped (``cooperative.fresh``).
+3. **Cooperative localization** (§II, eq. 1 and 2): a teammate's frame is paired with my own
+   frame of the same time; for each colour both see exactly once (ball, obstacle, beacon) the
+   teammate's position in my body frame follows by stereo (eq. 1,
+   ``cooperative.stereo_relative_position``), or by the law of cosines (eq. 2,
+   ``teammate_from_common_object``) where stereo has no disparity; a direct sighting of the
+   teammate (a yellow blob, monocular size-based distance) is one more estimate; the estimates
+   are checked against each other and fused (``cooperative.fuse``: a minority that
+   disagrees by more than ``consistency_tolerance_m`` is rejected, a contradictory set gives
+   nothing). Objects I cannot see are placed from what a teammate sees (eq. 2,
+   ``object_from_teammate``: Fig. 3, experiment 3).
+4. **Goals and navigation** (§III-IV, eq. 3-5): the robot nearest the orange obstacle takes it,
+   the others take the ball (``potential_field.assign_goals``, decided once and kept); the robot
+   walks along the potential-field force (``potential_field.potential_field``: attraction to the
+   goal, eq. 4; repulsion from the obstacle and from teammates at their estimated positions,
+   eq. 5), turns its body towards the walking direction, and points its head so that its goal and
+   the other object stay in view (common objects are what stereo needs).
+
+With sharing off the robot uses only what it sees: a teammate is known only while it is in view.
+
+Choices where the paper is silent
+---------------------------------
+- **Relative heading.** One common object fixes a teammate's position only when the two robots'
+  headings are related (see ``cooperative``). The robots start with known relative heading
+  ``initial_relative_heading_rad`` (0: side by side and parallel, as in §IV's set-ups) and share
+  their odometry, so ``psi(t) = psi0 + theta_teammate_odo(t) - theta_mine_odo(t)``
+  (``relative_heading = "odometry"``, the default). With ``"objects"``, two objects seen in
+  common give psi directly (``relative_heading_from_two_objects``, Fig. 2), else odometry is used.
+- **Tracking a moving teammate.** Each paired measurement gives the transform between the
+  teammate's odometry frame and mine (nearly constant: it drifts only with odometry error). The
+  brain takes the median of the last ``link_samples`` transforms (no older than
+  ``link_memory_s``) and applies it to the teammate's latest shared odometry pose, so the estimate
+  follows the teammate between measurements. Detections themselves are used only within the
+  window (2 s); the teammate is forgotten when its payloads stop for longer than the window or
+  when no measurement is younger than ``link_memory_s``.
+- **Objects out of view** are remembered in my odometry frame for ``landmark_memory_s``.
+- **Detour.** Eq. 3-5 have a local minimum where the goal is straight behind an obstacle (the
+  blind robot of experiment 3 walks towards a ball hidden by the obstacle). When the repulsion
+  (obstacles and teammates) opposes the attraction, a sideways force, ``detour_gain`` times the
+  opposing part of the repulsion, perpendicular to the attraction, is added on the side the
+  repulsion pushes to (away from the obstacle's and the teammate's side; left on an exact tie);
+  the side is kept until the repulsion no longer opposes. ``detour_gain = 0`` is plain PFA.
+- **Ambiguity.** Several blobs of one colour (two rivals) are not matched between robots: only
+  colours seen exactly once by both robots are common objects. With several teammates a yellow
+  blob is attributed to the teammate whose estimate it falls near (``sighting_gate_m``); with a
+  single teammate, to it.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, field
+
+import cv2
+import msgpack
+import numpy as np
+
+from swarmloc.agents.vision.cooperative import (
+    FRESH_WINDOW_S,
+    Detection,
+    fresh,
+    fuse,
+    object_from_teammate,
+    relative_heading_from_two_objects,
+    stereo_relative_position,
+    teammate_from_common_object,
+    wrap_rad,
+)
+from swarmloc.agents.vision.detection import COLOUR_CLASSES, detect_blobs
+from swarmloc.agents.vision.potential_field import (
+    BALL,
+    OBSTACLE,
+    FieldParams,
+    assign_goals,
+    potential_field,
+)
+from swarmloc.world.vision.camera import OBJECT_KINDS, CameraParams
+from swarmloc.world.vision.world import VisionCommand, VisionObservation
+
+#: Version of the shared-detections payload.
+SHARE_VERSION = 1
+#: Upper bound on one shared-detections payload and on its number of detections.
+MAX_SHARE_BYTES = 8 * 1024
+MAX_SHARED_DETECTIONS = 64
+#: Upper bound on an encoded camera frame.
+MAX_IMAGE_BYTES = 2 * 1024 * 1024
+MAX_ROBOT_ID = 65535
+MAX_DISTANCE_M = 100.0
+MAX_ODOMETRY_M = 1.0e6
+#: Slack on the field-of-view check of a shared bearing (rounding, blob centroid at the edge).
+FOV_TOLERANCE_RAD = 0.02
+#: Colour of each goal kind, and of teammates (seed 004 §III).
+GOAL_COLOURS = {BALL: "pink", OBSTACLE: "orange"}
+TEAMMATE_COLOUR = "yellow"
+_COMMON_COLOURS = ("pink", "orange", "blue")
+_SHARE_KEYS = ("v", "id", "t", "pan", "odom", "det")
+
+
+# -- configuration ------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class VisionAgentConfig:
+    """Parameters of :class:`VisionBrain` (see the module docstring)."""
+
+    sharing: bool = True
+    window_s: float = FRESH_WINDOW_S
+    relative_heading: str = "odometry"  # or "objects"
+    initial_relative_heading_rad: float = 0.0
+    consistency_tolerance_m: float = 0.3
+    pair_tolerance_s: float = 0.06
+    max_clock_skew_s: float = 0.05
+    link_samples: int = 10
+    link_memory_s: float = 5.0
+    sighting_gate_m: float = 0.5
+    landmark_memory_s: float = 5.0
+    assign_wait_s: float = 1.0
+    stop_margin_m: float = 0.04
+    turn_gain_per_s: float = 2.0
+    max_turn_rate_rad_s: float = 1.5
+    detour_gain: float = 1.0
+    head_span_fraction: float = 0.7
+    scan_period_s: float = 4.0
+    field: FieldParams = field(default_factory=FieldParams)
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.sharing, bool):
+            raise ValueError(f"sharing: must be true or false, got {self.sharing!r}")  # noqa: TRY004
+        if self.relative_heading not in ("odometry", "objects"):
+            raise ValueError(
+                f"relative_heading: must be 'odometry' or 'objects', got {self.relative_heading!r}"
+            )
+        for name in (
+            "window_s",
+            "consistency_tolerance_m",
+            "pair_tolerance_s",
+            "max_clock_skew_s",
+            "sighting_gate_m",
+            "landmark_memory_s",
+            "link_memory_s",
+            "assign_wait_s",
+            "stop_margin_m",
+            "turn_gain_per_s",
+            "max_turn_rate_rad_s",
+            "detour_gain",
+            "scan_period_s",
+        ):
+            value = getattr(self, name)
+            if (
+                isinstance(value, bool)
+                or not isinstance(value, (int, float))
+                or not (math.isfinite(value) and value >= 0.0)
+            ):
+                raise ValueError(f"{name}: must be a finite number >= 0, got {value!r}")
+        for name in ("window_s", "scan_period_s"):
+            if getattr(self, name) <= 0.0:
+                raise ValueError(f"{name}: must be > 0, got {getattr(self, name)!r}")
+        if (
+            not math.isfinite(self.initial_relative_heading_rad)
+            or abs(self.initial_relative_heading_rad) > math.pi
+        ):
+            raise ValueError("initial_relative_heading_rad: must lie in [-pi, pi]")
+        if (
+            isinstance(self.link_samples, bool)
+            or not isinstance(self.link_samples, int)
+            or not (1 <= self.link_samples <= 1000)
+        ):
+            raise ValueError(
+                f"link_samples: must be an integer in 1..1000, got {self.link_samples!r}"
+            )
+        if not 0.0 < self.head_span_fraction <= 1.0:
+            raise ValueError(
+                f"head_span_fraction: must be in (0, 1], got {self.head_span_fraction!r}"
+            )
+        if not isinstance(self.field, FieldParams):
+            raise ValueError("field: expected a FieldParams table")  # noqa: TRY004
+
+
+# -- image decoding -----------------------------------------------------------------------------
+
+
+def decode_image(payload, camera: CameraParams) -> np.ndarray:
+    """The BGR frame of an encoded (JPEG or PNG) ``payload``; ``ValueError`` naming the problem
+    if it is not bytes, is empty or too large, does not decode, or has the wrong size."""
+    if not isinstance(payload, (bytes, bytearray, memoryview)):
+        raise ValueError(f"image: expected bytes, got {type(payload).__name__}")  # noqa: TRY004
+    size = payload.nbytes if isinstance(payload, memoryview) else len(payload)
+    if size == 0:
+        raise ValueError("image: empty payload")
+    if size > MAX_IMAGE_BYTES:
+        raise ValueError(f"image: {size} bytes exceeds the limit of {MAX_IMAGE_BYTES} bytes")
+    image = cv2.imdecode(np.frombuffer(payload, dtype=np.uint8), cv2.IMREAD_COLOR)
+    if image is None:
+        raise ValueError(f"image: {size} bytes do not decode as an image (JPEG or PNG expected)")
+    if image.shape[:2] != (camera.height_px, camera.width_px):
+        raise ValueError(
+            f"image: decodes to {image.shape[1]} x {image.shape[0]} px, expected "
+            f"{camera.width_px} x {camera.height_px} px (W x H)"
+        )
+    return image
+
+
+#: Height over width of each colour's upright cylinder in the image (height_m / (2 radius_m)).
+_CYLINDER_ASPECT = {
+    "yellow": OBJECT_KINDS["teammate"].height_m / (2.0 * OBJECT_KINDS["teammate"].radius_m),
+    "orange": OBJECT_KINDS["obstacle"].height_m / (2.0 * OBJECT_KINDS["obstacle"].radius_m),
+    "blue": OBJECT_KINDS["beacon"].height_m / (2.0 * OBJECT_KINDS["beacon"].radius_m),
+}
+
+
+def _shape_agrees(measured_px: float, expected_px: float, tolerance: float) -> bool:
+    return abs(measured_px - expected_px) <= max(1.0, tolerance * expected_px)
+
+
+def detections_from_blobs(
+    blobs,
+    robot_id: int,
+    time_s: float,
+    head_pan_rad: float,
+    camera: CameraParams,
+    shape_tolerance: float = 0.15,
+) -> list[Detection]:
+    """Body-frame :class:`Detection` records of the usable blobs (module docstring, step 1).
+
+    A blob is used only when its shape is that of a whole object, so that its size (hence its
+    distance) and its centroid (hence its bearing) are right:
+
+    - a cylinder (robot, obstacle, beacon) must not touch the left or right image edge, and
+      unless it touches the top or bottom edge its height must be ``height_m / (2 radius_m)``
+      times its width (within ``shape_tolerance`` or 1 px): a narrower blob is a robot partly
+      hidden behind a nearer object, whose width-based distance would be far too long;
+    - the ball (the largest pink blob only) must be as wide as high, within the same tolerance;
+      cut by the bottom of the image only, it keeps its width as diameter.
+    """
+    out: list[Detection] = []
+    focal_px = camera.focal_px
+    last_col, last_row = camera.width_px - 1, camera.height_px - 1
+    seen_ball = False
+    for blob in blobs:
+        half_w = (blob.width_px - 1) / 2.0
+        half_h = (blob.height_px - 1) / 2.0
+        cut_side = blob.u_px - half_w < 0.5 or blob.u_px + half_w > last_col - 0.5
+        cut_top = blob.v_px - half_h < 0.5
+        cut_bottom = blob.v_px + half_h > last_row - 0.5
+        size_px, distance_m = blob.size_px, blob.distance_m
+        if cut_side:
+            continue
+        if blob.colour == "pink":
+            if seen_ball:
+                continue
+            seen_ball = True
+            if cut_top:
+                continue
+            if cut_bottom:
+                if blob.height_px < 0.5 * blob.width_px:
+                    continue  # less than half the ball: its width is a chord, not the diameter
+                size_px = blob.width_px / 2.0
+                depth_m = focal_px * COLOUR_CLASSES["pink"].size_m / size_px
+                distance_m = depth_m / math.cos(blob.bearing_rad)
+            elif not _shape_agrees(blob.height_px, blob.width_px, shape_tolerance):
+                continue
+        elif blob.colour in _CYLINDER_ASPECT and not (cut_top or cut_bottom):
+            expected_h = _CYLINDER_ASPECT[blob.colour] * blob.width_px
+            if not _shape_agrees(blob.height_px, expected_h, shape_tolerance):
+                continue
+        bearing = float(wrap_rad(head_pan_rad + blob.bearing_rad))
+        out.append(
+            Detection(robot_id, time_s, blob.colour, bearing, head_pan_rad, size_px, distance_m)
+        )
+    return out
+
+
+# -- the shared-detections payload (Telepathy) --------------------------------------------------
+
+
+@dataclass(frozen=True)
+class SharedFrame:
+    """One robot's frame as shared with its team: time, head pan, odometry, detections."""
+
+    robot_id: int
+    time_s: float
+    head_pan_rad: float
+    odometry_pose: tuple[float, float, float]
+    detections: tuple[Detection, ...]
+
+
+def encode_share(frame: SharedFrame) -> bytes:
+    """The msgpack payload of ``frame`` (a map ``v, id, t, pan, odom, det``; each detection is
+    ``[colour, bearing_rad, size_px, distance_m]``)."""
+    payload = msgpack.packb(
+        {
+            "v": SHARE_VERSION,
+            "id": int(frame.robot_id),
+            "t": float(frame.time_s),
+            "pan": float(frame.head_pan_rad),
+            "odom": [float(v) for v in frame.odometry_pose],
+            "det": [
+                [d.colour, float(d.bearing_rad), float(d.size_px), float(d.distance_m)]
+                for d in frame.detections[:MAX_SHARED_DETECTIONS]
+            ],
+        },
+        use_bin_type=True,
+    )
+    if len(payload) > MAX_SHARE_BYTES:  # pragma: no cover - 64 detections fit easily
+        raise ValueError(f"payload: {len(payload)} bytes exceeds {MAX_SHARE_BYTES}")
+    return payload
+
+
+def _number(
+    name: str, value, lo: float | None = None, hi: float | None = None, positive: bool = False
+) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ValueError(f"{name}: expected a number, got {type(value).__name__}")  # noqa: TRY004
+    number = float(value)
+    if not math.isfinite(number):
+        raise ValueError(f"{name}: must be finite, got {number!r}")
+    if positive and number <= 0.0:
+        raise ValueError(f"{name}: must be > 0, got {number!r}")
+    if lo is not None and number < lo:
+        raise ValueError(f"{name}: must be >= {lo}, got {number!r}")
+    if hi is not None and number > hi:
+        raise ValueError(f"{name}: must be <= {hi}, got {number!r}")
+    return number
+
+
+def decode_share(
+    payload,
+    camera: CameraParams,
+    sender_id: int | None = None,
+    now_s: float | None = None,
+    max_clock_skew_s: float = 0.05,
+) -> SharedFrame:
+    """Decode and validate a teammate's payload; ``ValueError`` naming the field if it is bad.
+
+    ``sender_id``: who the transport says sent it (the payload must claim the same id);
+    ``now_s``: the receiver's time (a frame more than ``max_clock_skew_s`` later is refused).
+    """
+    if not isinstance(payload, (bytes, bytearray, memoryview)):
+        raise ValueError(f"payload: expected bytes, got {type(payload).__name__}")  # noqa: TRY004
+    size = payload.nbytes if isinstance(payload, memoryview) else len(payload)
+    if size > MAX_SHARE_BYTES:
+        raise ValueError(f"payload: {size} bytes exceeds the limit of {MAX_SHARE_BYTES} bytes")
+    try:
+        wire = msgpack.unpackb(
+            payload,
+            raw=False,
+            use_list=True,
+            strict_map_key=True,
+            max_str_len=MAX_SHARE_BYTES,
+            max_bin_len=0,
+            max_ext_len=0,
+            max_array_len=MAX_SHARED_DETECTIONS + 8,
+            max_map_len=16,
+        )
+    except Exception as error:  # noqa: BLE001 -- msgpack raises many types, all mean "invalid"
+        raise ValueError(f"payload: not msgpack ({type(error).__name__})") from None
+    if not isinstance(wire, dict):
+        raise ValueError(f"payload: expected a msgpack map, got {type(wire).__name__}")  # noqa: TRY004
+    for key in _SHARE_KEYS:
+        if key not in wire:
+            raise ValueError(f"{key}: missing field")
+    extra = sorted(str(k) for k in wire if k not in _SHARE_KEYS)
+    if extra:
+        raise ValueError(f"{extra[0]}: unknown field")
+    if wire["v"] != SHARE_VERSION or isinstance(wire["v"], bool):
+        raise ValueError(f"v: version {wire['v']!r}, expected {SHARE_VERSION}")
+    robot_id = wire["id"]
+    if (
+        isinstance(robot_id, bool)
+        or not isinstance(robot_id, int)
+        or not 0 <= robot_id <= MAX_ROBOT_ID
+    ):
+        raise ValueError(f"id: expected a robot id in 0..{MAX_ROBOT_ID}, got {robot_id!r}")
+    if sender_id is not None and robot_id != sender_id:
+        raise ValueError(f"id: payload from robot {sender_id} claims to be robot {robot_id}")
+    time_s = _number("t", wire["t"], lo=0.0)
+    if now_s is not None and time_s > now_s + max_clock_skew_s:
+        raise ValueError(f"t: {time_s:.3f} s is in the future (receiver's time {now_s:.3f} s)")
+    pan = _number(
+        "pan", wire["pan"], lo=-camera.pan_limit_rad - 1e-9, hi=camera.pan_limit_rad + 1e-9
+    )
+    odom = wire["odom"]
+    if not isinstance(odom, list) or len(odom) != 3:
+        raise ValueError("odom: expected [x_m, y_m, heading_rad]")
+    odometry = (
+        _number("odom[0]", odom[0], -MAX_ODOMETRY_M, MAX_ODOMETRY_M),
+        _number("odom[1]", odom[1], -MAX_ODOMETRY_M, MAX_ODOMETRY_M),
+        _number("odom[2]", odom[2], -math.pi, math.pi),
+    )
+    det = wire["det"]
+    if not isinstance(det, list):
+        raise ValueError(f"det: expected a list, got {type(det).__name__}")  # noqa: TRY004
+    if len(det) > MAX_SHARED_DETECTIONS:
+        raise ValueError(f"det: {len(det)} detections, at most {MAX_SHARED_DETECTIONS}")
+    half_fov = camera.half_fov_rad + FOV_TOLERANCE_RAD
+    max_size_px = float(max(camera.width_px, camera.height_px))
+    detections = []
+    for i, item in enumerate(det):
+        where = f"det[{i}]"
+        if not isinstance(item, list) or len(item) != 4:
+            raise ValueError(f"{where}: expected [colour, bearing_rad, size_px, distance_m]")
+        colour, bearing, size_px, distance = item
+        if colour not in COLOUR_CLASSES:
+            raise ValueError(f"{where}.colour: unknown colour {colour!r}")
+        bearing = _number(f"{where}.bearing_rad", bearing, -math.pi, math.pi)
+        if abs(float(wrap_rad(bearing - pan))) > half_fov:
+            raise ValueError(
+                f"{where}.bearing_rad: {bearing:.3f} rad is outside the camera's field of view "
+                f"(head pan {pan:.3f} rad, half field of view {camera.half_fov_rad:.3f} rad)"
+            )
+        size_px = _number(f"{where}.size_px", size_px, positive=True, hi=max_size_px)
+        distance = _number(f"{where}.distance_m", distance, positive=True, hi=MAX_DISTANCE_M)
+        detections.append(Detection(robot_id, time_s, colour, bearing, pan, size_px, distance))
+    return SharedFrame(robot_id, time_s, pan, odometry, tuple(detections))
+
+
+# -- what the brain reports ---------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class VisionEstimates:
+    """The brain's estimates after a step, in its body frame (x forward, y left, metres).
+
+    ``teammates``: robot id -> position; ``ball``/``obstacle``: position or ``None``;
+    ``ball_source``: ``"own"`` (seen now), ``"teammate"`` (eq. 2 from a teammate's detection),
+    ``"memory"`` (remembered) or ``None``; ``goal``: ``"ball"``, ``"obstacle"`` or ``None``
+    (not assigned yet); ``reached``: the robot believes it is at its goal.
+    """
+
+    time_s: float
+    teammates: dict[int, tuple[float, float]]
+    ball: tuple[float, float] | None
+    obstacle: tuple[float, float] | None
+    ball_source: str | None
+    goal: str | None
+    reached: bool
+
+
+@dataclass
+class _Frame:
+    time_s: float
+    pose: np.ndarray  # odometry pose (3,)
+    head_pan_rad: float
+    detections: list[Detection]
+
+
+def _rot(theta: float) -> np.ndarray:
+    c, s = math.cos(theta), math.sin(theta)
+    return np.array([[c, -s], [s, c]])
+
+
+def _unique(detections, colour: str) -> Detection | None:
+    found = [d for d in detections if d.colour == colour]
+    return found[0] if len(found) == 1 else None
+
+
+class VisionBrain:
+    """One vision robot's brain (seed 004); see the module docstring.
+
+    ``teammate_ids``: the other robots of its team (the ids their payloads carry). ``camera``:
+    the intrinsics its images are taken with. ``rng``: its own generator (the brain is
+    deterministic today; the generator is part of the brain contract).
+    """
+
+    def __init__(
+        self,
+        robot_id: int,
+        teammate_ids,
+        config: VisionAgentConfig,
+        camera: CameraParams,
+        rng: np.random.Generator,
+    ):
+        if (
+            isinstance(robot_id, bool)
+            or not isinstance(robot_id, (int, np.integer))
+            or not (0 <= robot_id <= MAX_ROBOT_ID)
+        ):
+            raise ValueError(f"robot_id: expected 0..{MAX_ROBOT_ID}, got {robot_id!r}")
+        self.robot_id = int(robot_id)
+        self.teammate_ids = tuple(sorted(int(i) for i in teammate_ids))
+        if self.robot_id in self.teammate_ids:
+            raise ValueError("teammate_ids: must not contain the robot's own id")
+        self.config = config
+        self.camera = camera
+        self.rng = rng
+        self.now_s = 0.0
+        self.pose = np.zeros(3)
+        self.head_pan_rad = 0.0
+        self._first_object_s: float | None = None
+        self._frames: deque[_Frame] = deque()
+        self._last: _Frame | None = None
+        self._theirs: dict[int, deque[SharedFrame]] = {i: deque() for i in self.teammate_ids}
+        self._unpaired: dict[int, list[SharedFrame]] = {i: [] for i in self.teammate_ids}
+        # Frame-transform samples (time, tau (2,), phi) per teammate: its odometry frame -> mine.
+        self._links: dict[int, deque[tuple[float, np.ndarray, float]]] = {
+            i: deque() for i in self.teammate_ids
+        }
+        # Direct sightings (time, position in my odometry frame) per teammate.
+        self._sightings: dict[int, deque[tuple[float, np.ndarray]]] = {
+            i: deque() for i in self.teammate_ids
+        }
+        self._landmarks: dict[str, tuple[float, np.ndarray, str]] = {}
+        self._teammates_now: dict[int, np.ndarray] = {}
+        self.goal: str | None = None
+        self.reached = False
+        self._detour_side = 0
+        self.steps = 0
+
+    # -- Telepathy ------------------------------------------------------------------------------
+
+    def share(self) -> bytes | None:
+        """This step's payload for the team (``None`` before the first step or with sharing off)."""
+        if not self.config.sharing or self._last is None:
+            return None
+        f = self._last
+        return encode_share(
+            SharedFrame(
+                self.robot_id,
+                f.time_s,
+                f.head_pan_rad,
+                tuple(float(v) for v in f.pose),
+                tuple(f.detections),
+            )
+        )
+
+    def receive(self, sender_id: int, payload) -> None:
+        """Take a teammate's payload; ``ValueError`` (naming the field) if it is invalid."""
+        if not self.config.sharing:
+            return
+        if sender_id not in self._theirs:
+            raise ValueError(
+                f"sender: robot {sender_id!r} is not a teammate of robot {self.robot_id}"
+            )
+        frame = decode_share(
+            payload, self.camera, sender_id, self.now_s, self.config.max_clock_skew_s
+        )
+        if self.now_s - frame.time_s > self.config.window_s:
+            return  # too old to use: dropped, not an error
+        frames = self._theirs[sender_id]
+        if frames and frame.time_s <= frames[-1].time_s:
+            return  # a duplicate or out of order: the newer frame wins
+        frames.append(frame)
+        self._unpaired[sender_id].append(frame)
+
+    # -- the step -------------------------------------------------------------------------------
+
+    def step(self, obs: VisionObservation) -> VisionCommand:
+        """Process one observation; return the velocity and head command."""
+        cfg = self.config
+        image = decode_image(obs.image, self.camera)  # raises before any state changes
+        pose = np.array(
+            [_number(f"odometry_pose[{i}]", v) for i, v in enumerate(obs.odometry_pose)]
+        )
+        pan = _number("head_pan_rad", obs.head_pan_rad, -math.pi, math.pi)
+        now = _number("time_s", obs.time_s, lo=0.0)
+        if self.steps and now < self.now_s:
+            raise ValueError(f"time_s: {now} is earlier than the previous step's {self.now_s}")
+        self.now_s, self.pose, self.head_pan_rad = now, pose, pan
+        self.steps += 1
+
+        blobs = detect_blobs(image, self.camera)
+        frame = _Frame(
+            now, pose, pan, detections_from_blobs(blobs, self.robot_id, now, pan, self.camera)
+        )
+        self._frames.append(frame)
+        self._last = frame
+        self._prune()
+        self._record_sightings(frame)
+        if cfg.sharing:
+            for tid in self.teammate_ids:
+                self._pair(tid)
+        self._update_teammates()
+        self._update_landmarks(frame)
+        self._assign()
+        return self._command()
+
+    def estimates(self) -> VisionEstimates:
+        """What the brain believes after its last step (body frame)."""
+        ball = self._body("ball")
+        obstacle = self._body("obstacle")
+        return VisionEstimates(
+            time_s=self.now_s,
+            teammates={i: (float(p[0]), float(p[1])) for i, p in self._teammates_now.items()},
+            ball=None if ball is None else (float(ball[0]), float(ball[1])),
+            obstacle=None if obstacle is None else (float(obstacle[0]), float(obstacle[1])),
+            ball_source=self._landmarks["ball"][2] if "ball" in self._landmarks else None,
+            goal=self.goal,
+            reached=self.reached,
+        )
+
+    # -- frames ---------------------------------------------------------------------------------
+
+    def _prune(self) -> None:
+        horizon = self.now_s - self.config.window_s
+        while self._frames and self._frames[0].time_s < horizon:
+            self._frames.popleft()
+        link_horizon = self.now_s - self.config.link_memory_s
+        for tid in self.teammate_ids:
+            theirs, links, sightings = self._theirs[tid], self._links[tid], self._sightings[tid]
+            while theirs and theirs[0].time_s < horizon:
+                theirs.popleft()
+            while sightings and sightings[0][0] < horizon:
+                sightings.popleft()
+            while links and links[0][0] < link_horizon:
+                links.popleft()
+            self._unpaired[tid] = [f for f in self._unpaired[tid] if f.time_s >= horizon]
+        memory = self.now_s - self.config.landmark_memory_s
+        for name in [k for k, v in self._landmarks.items() if v[0] < memory]:
+            del self._landmarks[name]
+
+    def _my_frame_at(self, time_s: float) -> _Frame | None:
+        best = None
+        for f in self._frames:
+            if abs(f.time_s - time_s) <= self.config.pair_tolerance_s and (
+                best is None or abs(f.time_s - time_s) < abs(best.time_s - time_s)
+            ):
+                best = f
+        return best
+
+    @staticmethod
+    def _to_odom(frame_pose: np.ndarray, body_xy) -> np.ndarray:
+        return frame_pose[:2] + _rot(frame_pose[2]) @ np.asarray(body_xy, float)
+
+    def _to_body_now(self, odom_xy: np.ndarray) -> np.ndarray:
+        return _rot(-self.pose[2]) @ (odom_xy - self.pose[:2])
+
+    # -- teammates ------------------------------------------------------------------------------
+
+    def _predicted_in_frame(self, tid: int, frame: _Frame) -> np.ndarray | None:
+        """Teammate ``tid``'s estimated position in ``frame``'s body frame (from the links)."""
+        link = self._link(tid)
+        theirs = self._theirs[tid]
+        if link is None or not theirs:
+            return None
+        tau, phi = link
+        # The teammate's odometry pose closest in time to the frame.
+        th = min(theirs, key=lambda f: abs(f.time_s - frame.time_s))
+        odom_xy = tau + _rot(phi) @ np.asarray(th.odometry_pose[:2])
+        return _rot(-frame.pose[2]) @ (odom_xy - frame.pose[:2])
+
+    def _attribute_sighting(self, frame: _Frame, position_body: np.ndarray) -> int | None:
+        if len(self.teammate_ids) == 1:
+            return self.teammate_ids[0]
+        best, best_gap = None, self.config.sighting_gate_m
+        for tid in self.teammate_ids:
+            predicted = self._predicted_in_frame(tid, frame)
+            if predicted is not None:
+                gap = float(np.hypot(*(predicted - position_body)))
+                if gap <= best_gap:
+                    best, best_gap = tid, gap
+        return best
+
+    def _record_sightings(self, frame: _Frame) -> None:
+        for d in frame.detections:
+            if d.colour != TEAMMATE_COLOUR:
+                continue
+            tid = self._attribute_sighting(frame, d.position_m())
+            if tid is not None:
+                self._sightings[tid].append(
+                    (frame.time_s, self._to_odom(frame.pose, d.position_m()))
+                )
+
+    def _relative_heading(self, mine: _Frame, theirs: SharedFrame) -> float:
+        cfg = self.config
+        if cfg.relative_heading == "objects":
+            pairs = [
+                (_unique(mine.detections, c), _unique(theirs.detections, c))
+                for c in ("pink", "orange")
+            ]
+            if all(m is not None and t is not None for m, t in pairs):
+                psi = relative_heading_from_two_objects(
+                    (pairs[0][0], pairs[1][0]), (pairs[0][1], pairs[1][1])
+                )
+                if psi is not None:
+                    return psi
+        return float(
+            wrap_rad(cfg.initial_relative_heading_rad + theirs.odometry_pose[2] - mine.pose[2])
+        )
+
+    def _pair(self, tid: int) -> None:
+        """Turn the teammate's unpaired frames into frame-transform samples (eq. 1, eq. 2)."""
+        pending, keep = self._unpaired[tid], []
+        for theirs in pending:
+            mine = self._my_frame_at(theirs.time_s)
+            if mine is None:
+                if theirs.time_s > self.now_s - self.config.pair_tolerance_s:
+                    keep.append(theirs)  # my frame of that time may still come
+                continue
+            psi = self._relative_heading(mine, theirs)
+            estimates = []
+            for colour in _COMMON_COLOURS:
+                m, t = _unique(mine.detections, colour), _unique(theirs.detections, colour)
+                if m is None or t is None:
+                    continue
+                est = stereo_relative_position(m, t, psi, self.camera.focal_px)  # eq. 1
+                if est is None:
+                    est = teammate_from_common_object(m, t, psi)  # eq. 2
+                if est is not None:
+                    estimates.append(est)
+            sighted = [d for d in mine.detections if d.colour == TEAMMATE_COLOUR]
+            for d in sighted:
+                if self._attribute_sighting(mine, d.position_m()) == tid:
+                    estimates.append(d.position_m())
+            if len(self.teammate_ids) == 1:
+                me_seen = [d for d in theirs.detections if d.colour == TEAMMATE_COLOUR]
+                if len(me_seen) == 1:  # the teammate sees me: it is at -R(psi) (me in its frame)
+                    estimates.append(-(_rot(psi) @ me_seen[0].position_m()))
+            if not estimates:
+                continue
+            r = fuse(estimates, self.config.consistency_tolerance_m)
+            if r is None:
+                continue
+            phi = float(wrap_rad(mine.pose[2] + psi - theirs.odometry_pose[2]))
+            tau = self._to_odom(mine.pose, r) - _rot(phi) @ np.asarray(theirs.odometry_pose[:2])
+            self._links[tid].append((theirs.time_s, tau, phi))
+        self._unpaired[tid] = keep
+
+    def _link(self, tid: int) -> tuple[np.ndarray, float] | None:
+        samples = list(self._links[tid])[-self.config.link_samples :]
+        if not samples:
+            return None
+        # Component-wise median: a wrong measurement among the samples has no effect.
+        tau = np.median([s[1] for s in samples], axis=0)
+        phis = np.array([s[2] for s in samples])
+        ref = phis[-1]
+        phi = float(wrap_rad(ref + np.median(wrap_rad(phis - ref))))
+        return tau, phi
+
+    def _update_teammates(self) -> None:
+        self._teammates_now = {}
+        for tid in self.teammate_ids:
+            link = self._link(tid) if self.config.sharing else None
+            if link is not None and self._theirs[tid]:
+                tau, phi = link
+                odom_xy = tau + _rot(phi) @ np.asarray(self._theirs[tid][-1].odometry_pose[:2])
+                self._teammates_now[tid] = self._to_body_now(odom_xy)
+            elif self._sightings[tid]:
+                self._teammates_now[tid] = self._to_body_now(self._sightings[tid][-1][1])
+
+    # -- objects --------------------------------------------------------------------------------
+
+    def _update_landmarks(self, frame: _Frame) -> None:
+        for name, colour in (("ball", "pink"), ("obstacle", "orange")):
+            own = [d for d in frame.detections if d.colour == colour]
+            if own:
+                nearest = min(own, key=lambda d: d.distance_m)
+                self._landmarks[name] = (
+                    frame.time_s,
+                    self._to_odom(frame.pose, nearest.position_m()),
+                    "own",
+                )
+                continue
+            if not self.config.sharing:
+                continue
+            relayed = []
+            latest_t = -math.inf
+            for tid in self.teammate_ids:
+                theirs = fresh(  # the teammate's latest frame within the window
+                    [
+                        d
+                        for f in list(self._theirs[tid])[-1:]
+                        for d in f.detections
+                        if d.colour == colour
+                    ],
+                    self.now_s,
+                    self.config.window_s,
+                )
+                if not theirs:
+                    continue
+                t_s = theirs[0].time_s
+                mine = self._my_frame_at(t_s)
+                link = self._link(tid)
+                if mine is None or link is None:
+                    continue
+                teammate_body = self._predicted_in_frame(tid, mine)
+                psi = float(
+                    wrap_rad(link[1] + self._theirs[tid][-1].odometry_pose[2] - mine.pose[2])
+                )
+                det = min(theirs, key=lambda d: d.distance_m)
+                obj = object_from_teammate(teammate_body, psi, det)  # eq. 2 (Fig. 3)
+                if obj is not None:
+                    relayed.append(self._to_odom(mine.pose, obj))
+                    latest_t = max(latest_t, t_s)
+            if relayed:
+                fused = fuse(relayed, self.config.consistency_tolerance_m)
+                if fused is not None:
+                    self._landmarks[name] = (latest_t, fused, "teammate")
+                    continue
+            if name in self._landmarks and self._landmarks[name][2] != "memory":
+                t_s, xy, _ = self._landmarks[name]
+                self._landmarks[name] = (t_s, xy, "memory")
+
+    def _body(self, name: str) -> np.ndarray | None:
+        if name not in self._landmarks:
+            return None
+        return self._to_body_now(self._landmarks[name][1])
+
+    # -- goals, head and body -------------------------------------------------------------------
+
+    def _assign(self) -> None:
+        if self.goal is not None:
+            return
+        ball, obstacle = self._body("ball"), self._body("obstacle")
+        if ball is None and obstacle is None:
+            return
+        if self._first_object_s is None:
+            self._first_object_s = self.now_s
+        # Wait (at most assign_wait_s from the first object seen) until every teammate is placed.
+        waited = self.now_s - self._first_object_s >= self.config.assign_wait_s
+        known = sorted(self._teammates_now)
+        if len(known) < len(self.teammate_ids) and not waited:
+            return
+        ids = sorted([self.robot_id, *known])
+        positions = [np.zeros(2) if i == self.robot_id else self._teammates_now[i] for i in ids]
+        goals = assign_goals(positions, obstacle, ball)
+        self.goal = goals[ids.index(self.robot_id)] or BALL
+
+    def _head_target(self, goal_xy: np.ndarray | None) -> float:
+        cfg, cam = self.config, self.camera
+        points = []
+        if goal_xy is not None:
+            points.append(goal_xy)
+        for name in ("ball", "obstacle"):
+            p = self._body(name)
+            if p is not None and (self.goal is None or name != self.goal):
+                points.append(p)
+        if not points:  # nothing known: sweep the head (a triangle wave over the pan range)
+            phase = (self.now_s / cfg.scan_period_s) % 1.0
+            return cam.pan_limit_rad * 0.9 * (4.0 * abs(phase - 0.5) - 1.0)
+        bearings = np.array([math.atan2(p[1], p[0]) for p in points])
+        lo, hi = float(bearings.min()), float(bearings.max())
+        if hi - lo <= 2.0 * cam.half_fov_rad * cfg.head_span_fraction:
+            target = 0.5 * (lo + hi)
+        else:
+            target = float(bearings[0])
+        return float(np.clip(target, -cam.pan_limit_rad, cam.pan_limit_rad))
+
+    def _detour(self, attraction: np.ndarray, repulsion_force: np.ndarray) -> np.ndarray:
+        """The detour force (module docstring): sideways, on the side the repulsion leans to."""
+        gain = self.config.detour_gain
+        norm = float(np.hypot(*attraction))
+        opposing = -float(repulsion_force @ attraction) / norm if norm > 0.0 else 0.0
+        if gain <= 0.0 or opposing <= 0.0:
+            self._detour_side = 0
+            return np.zeros(2)
+        ahead = attraction / norm
+        left = np.array([-ahead[1], ahead[0]])
+        if self._detour_side == 0:  # chosen once per detour: no dithering on noise
+            self._detour_side = -1 if float(repulsion_force @ left) < 0.0 else 1
+        return gain * opposing * self._detour_side * left
+
+    def _command(self) -> VisionCommand:
+        cfg, fp = self.config, self.config.field
+        goal_xy = self._body(self.goal) if self.goal is not None else None
+        head = self._head_target(goal_xy)
+        if self.goal is None:
+            return VisionCommand(0.0, 0.0, 0.0, head)
+        if goal_xy is None:  # assigned but lost: turn on the spot while the head sweeps
+            return VisionCommand(0.0, 0.0, 0.5 * cfg.max_turn_rate_rad_s, head)
+        goal_radius = OBJECT_KINDS[self.goal].radius_m
+        stop_m = OBJECT_KINDS["teammate"].radius_m + goal_radius + cfg.stop_margin_m
+        distance = float(np.hypot(*goal_xy))
+        if distance <= stop_m or (self.reached and distance <= stop_m + 0.1):
+            self.reached = True
+            return VisionCommand(0.0, 0.0, 0.0, head)
+        self.reached = False
+        obstacles = []
+        if self.goal != OBSTACLE and self._body("obstacle") is not None:
+            obstacles.append(self._body("obstacle"))
+        teammates = list(self._teammates_now.values())
+        origin = np.zeros(2)
+        result = potential_field(origin, goal_xy, obstacles or None, teammates or None, fp)
+        force = result.attraction + result.repulsion
+        force = force + self._detour(result.attraction, result.repulsion)
+        speed = float(np.hypot(*force))
+        velocity = force * (fp.max_speed_mps / speed) if speed > fp.max_speed_mps else force
+        turn = 0.0
+        if speed > 1e-6:
+            turn = float(
+                np.clip(
+                    cfg.turn_gain_per_s * math.atan2(velocity[1], velocity[0]),
+                    -cfg.max_turn_rate_rad_s,
+                    cfg.max_turn_rate_rad_s,
+                )
+            )
+        return VisionCommand(float(velocity[0]), float(velocity[1]), turn, head)

@@ -1,0 +1,186 @@
+"""Laser experiments: the papers' tables and figures (seeds 002 and 003) as seeded replications.
+
+Seeds ``002_fe2ac635ba0eab3e.txt`` §6 table 3 and ``003_5278cbbbf8cc61de.txt`` §V figs. 3-4 and the
+robustness runs (``/work/shared/seeds/``).
+
+Specs are ordinary experiment specs (``deploy/experiments/laser-*.toml``) with
+``family = "laser"``: groups of laser scenarios (``deploy/scenarios/laser/``) times a grid of
+``section.key`` values, each setting run ``replications`` times with seeds ``seed + r``. The
+machinery of ``swarmloc experiment`` runs them (spec checks, plan, spawned pool, one CSV row per
+finished job, resume, progress); this module supplies what is laser-specific, through the
+hooks of :data:`swarmloc.deploy.lab.experiment.FAMILIES`:
+
+- :func:`settings`: every setting's scenario built and validated before anything runs (a group's
+  ``duration_s`` becomes ``world.steps``);
+- :func:`run_job`: one replication with :func:`~swarmloc.deploy.lab.laser.runner.run_laser`;
+- :func:`columns` and :func:`row`: the tidy results file. Columns: the setting (experiment,
+  group, setting, scenario, map, algorithm, population, cooperative, robots, steps, seed,
+  replication, one column per grid key), the run summary (``laser_batch`` module docstring),
+  cpu_s, wall_s, config_hash, and ``position_error_mm``: every robot's error at every step
+  (:func:`~swarmloc.deploy.lab.laser.runner.encode_series_mm`), from which the report draws the
+  papers' error-over-time figures.
+
+The shipped specs: ``laser-table3`` (002 table 3), ``laser-kidnap`` (003 fig. 3),
+``laser-collab`` (003 fig. 4) and ``laser-robustness`` (003 §V, 500 runs). ``swarmloc
+laser-experiment`` runs specs and writes the report (``deploy/lab/laser/report.py``);
+``--replications N`` makes a preview that the full run later resumes from;
+``swarmloc experiment laser-kidnap`` runs one spec alone.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from importlib import resources
+from pathlib import Path
+
+from swarmloc.config import ConfigError
+from swarmloc.deploy.lab.experiment import (
+    ExperimentSpec,
+    Job,
+    Setting,
+    load_spec,
+    run_experiment,
+    with_overrides,
+)
+from swarmloc.deploy.lab.laser.runner import encode_series_mm, load_laser_scenario, run_laser
+
+#: The setting's description, before the grid keys.
+LEAD_COLUMNS = ("experiment", "group", "setting", "scenario", "map", "algorithm", "population",
+                "cooperative", "robots", "steps", "seed", "replication")
+#: The run's figures, after the grid keys (``position_error_mm`` last: it is long).
+METRIC_COLUMNS = ("final_error_m", "final_error_max_m", "final_error_sym_m",
+                  "final_heading_error_rad", "mean_error_m", "settle_step", "settled_robots",
+                  "localized", "kidnap_step", "settled_before_kidnap", "recovered",
+                  "recover_steps", "first_contact_step", "bumps", "cpu_s", "wall_s",
+                  "config_hash", "position_error_mm")
+#: The experiments of the report, in its order.
+REPORT_SPECS = ("laser-table3", "laser-kidnap", "laser-collab", "laser-robustness")
+
+
+def _value_text(value) -> str:
+    return value if isinstance(value, str) else json.dumps(value)
+
+
+def columns(spec: ExperimentSpec) -> list[str]:
+    """The header of a laser results file."""
+    return [*LEAD_COLUMNS, *spec.grid_keys(), *METRIC_COLUMNS]
+
+
+def settings(spec: ExperimentSpec) -> list[Setting]:
+    """Every setting of a laser spec, each scenario loaded and validated once; an error names
+    the group and the setting."""
+    out = []
+    for g in spec.group:
+        fixed = [f"{k}={json.dumps(v)}" for k, v in g.set]
+        for scenario_name in g.scenarios:
+            for combo in g.combinations():
+                grid = tuple((k, _value_text(v)) for k, v in combo)
+                sid = "/".join([g.name, scenario_name, *(f"{k}={t}" for k, t in grid)])
+                overrides = fixed + [f"{k}={json.dumps(v)}" for k, v in combo]
+                where = f"experiment '{spec.name}', group '{g.name}', setting '{sid}'"
+                try:
+                    scenario = load_laser_scenario(scenario_name, overrides)
+                    if g.duration_s is not None:
+                        steps = max(1, round(g.duration_s / scenario.world.dt_s))
+                        overrides.append(f"world.steps={steps}")
+                        scenario = load_laser_scenario(scenario_name, overrides)
+                except (ConfigError, ValueError) as exc:
+                    raise ConfigError(f"{where}: {exc}") from None
+                w = scenario.world
+                out.append(Setting(
+                    sid, g.name, scenario_name, tuple(overrides), grid, scenario.config_hash(),
+                    w.robots, w.steps * w.dt_s, scenario.algorithm.name, cost=w.robots * w.steps))
+    return out
+
+
+def run_job(job: Job) -> dict:
+    """One replication of a laser setting; a flat dict of what the row needs."""
+    t0, c0 = time.perf_counter(), time.process_time()
+    scenario = load_laser_scenario(job.scenario, list(job.overrides))
+    result = run_laser(scenario)
+    algo = scenario.algorithm
+    return {
+        "map": scenario.world.map,
+        "algorithm": algo.name,
+        "population": algo.entry.population_text(algo.resolved_params()),
+        "cooperative": algo.cooperative,
+        "robots": scenario.world.robots,
+        "steps": scenario.world.steps,
+        **result.summary,
+        "cpu_s": round(time.process_time() - c0, 3),
+        "wall_s": round(time.perf_counter() - t0, 3),
+        "position_error_mm": encode_series_mm(result.position_error_m),
+    }
+
+
+def _cell(value):
+    if isinstance(value, bool):
+        return int(value)
+    if isinstance(value, float):
+        return round(value, 6)
+    return value
+
+
+def row(spec: ExperimentSpec, job: Job, out: dict) -> list:
+    """One results row, in :func:`columns` order (None written as an empty cell)."""
+    grid = dict(job.grid)
+    lead = {"experiment": spec.name, "group": job.group, "setting": job.setting,
+            "scenario": job.scenario, "seed": job.seed, "replication": job.replication,
+            "config_hash": job.config_hash}
+    values = {**out, **lead}
+    return [*(_cell(values[c]) for c in LEAD_COLUMNS), *(grid.get(k) for k in spec.grid_keys()),
+            *(_cell(values[c]) for c in METRIC_COLUMNS)]
+
+
+# -- command line -----------------------------------------------------------------------------
+
+
+def shipped_laser_specs() -> list[str]:
+    folder = resources.files("swarmloc.deploy") / "experiments"
+    return sorted(p.name[:-5] for p in folder.iterdir()
+                  if p.name.startswith("laser-") and p.name.endswith(".toml"))
+
+
+def results_path(results_dir: Path, spec: ExperimentSpec) -> Path:
+    """``<results_dir>/<spec name>.csv``. A run with fewer replications writes the same file:
+    its (setting, seed) rows are the first ones of the full run, which resumes from them."""
+    return Path(results_dir) / f"{spec.name}.csv"
+
+
+def main_laser_experiment(args) -> int:
+    """``swarmloc laser-experiment [SPEC ...]``: run laser specs (resumable), then write the
+    report from their results files."""
+    from swarmloc.deploy.lab.laser.report import write_report
+
+    names = args.specs or list(REPORT_SPECS)
+    specs = [with_overrides(load_spec(name), replications=args.replications) for name in names]
+    for spec in specs:
+        if spec.family != "laser":
+            raise ConfigError(f"experiment '{spec.name}' is not a laser experiment "
+                              f"(family = {spec.family!r}); use `swarmloc experiment`")
+    paths = [results_path(Path(args.results_dir), spec) for spec in specs]
+    if not args.report_only:
+        for spec, path in zip(specs, paths):
+            t0 = time.perf_counter()
+            try:
+                written = run_experiment(spec, path, workers=args.workers,
+                                         progress=not args.quiet)
+            except KeyboardInterrupt:
+                print(f"\ninterrupted: finished replications are in {path}; "
+                      f"run the same command again to resume", file=sys.stderr)
+                return 130
+            print(f"experiment {spec.name}: {written} new rows in {path} "
+                  f"({time.perf_counter() - t0:.1f} s)")
+    if args.report:
+        command = "swarmloc laser-experiment " + " ".join(
+            [*names, *([f"--replications {args.replications}"] if args.replications else [])])
+        page = write_report([p for p in paths if p.exists()], Path(args.report), command=command)
+        print(f"report: {page}")
+    return 0
+
+
+__all__ = ["LEAD_COLUMNS", "METRIC_COLUMNS", "REPORT_SPECS", "columns",
+           "main_laser_experiment", "results_path", "row", "run_job", "settings",
+           "shipped_laser_specs"]

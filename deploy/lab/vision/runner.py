@@ -1,0 +1,576 @@
+"""Seed 004's experiments with the vision robots, in one process: world + one brain per robot.
+
+Seed 004 §IV (``seeds/004_e71d8ee95e0baa56.txt``, Peula et al.) tests cooperative localization from shared colour detections with two
+Aibo ERS-7 robots:
+
+- **Experiment 1** (§IV-A): two robots side by side, "close to each other on purpose", a ball in
+  front; both must catch it. Without sharing they "crash in the middle of the experiment, and
+  they go on crashing till they catch the ball"; sharing the ball's position and the neck angle,
+  they estimate each other's position by stereo and avoid each other.
+- **Experiment 2** (§IV-B): a ball and an orange obstacle, both seen by both robots; the robot
+  nearest the obstacle must catch it and the other the ball (Fig. 7a/7b: both assignments).
+- **Experiment 3** (§IV-C): the obstacle hides the ball from one robot ("white"); the other
+  ("black") sends it, and the goals are assigned as in experiment 2 (Fig. 8a/8b).
+
+The scenarios are ``deploy/scenarios/vision/vision-exp{1,2,3}.toml``: a ``[setup]`` table
+(:class:`SetupConfig`: the experiment and the ranges its layout is drawn from), ``[world]``
+(``VisionWorldConfig`` without placements) and ``[agent]`` (``VisionAgentConfig``). Each seeded
+run draws its own layout (:func:`layout`, generator ``[seed, 2]``), checked by rendering: each
+robot sees what the paper says it sees at the start (a noise-free frame, the agent's own
+detection). Left/right and variant a/b of the paper's figures are drawn at random.
+
+:func:`run_vision` runs one seed: :class:`~swarmloc.world.vision.world.VisionWorld` and one
+:class:`~swarmloc.agents.vision.brain.VisionBrain` per robot (generator ``[seed, 1, id]``), in
+lockstep; shared detections travel as the same bytes payloads an agent process would publish on
+``swarmloc/<run>/team/<team>/blobs/<id>``, through :class:`TeamChannel` (emitted at tick k,
+delivered at k+1). An image or a payload that a brain rejects (``ValueError``) is counted and the
+run goes on (the robot keeps its previous command for that tick). Measured per run, against the
+world's ground truth: robot-robot collisions (events) and contact time, robot-obstacle
+collisions, whether every robot chose the goal the rule gives on the true start positions, the
+time until each robot reaches its (correct) goal (centre within ``body + goal radius +
+reach_margin_m``), and the error of each robot's estimate of its teammate and of the ball.
+
+:func:`~swarmloc.deploy.lab.vision.experiment.run_experiments` repeats runs over seeds and both
+sharing modes in a pool of spawned processes and writes a CSV;
+:func:`~swarmloc.deploy.lab.vision.report.write_report` writes ``docs/vision/README.md`` with the
+table next to the paper's claims, figures, and the detection accuracy of
+:func:`~swarmloc.deploy.lab.vision.experiment.detection_accuracy` (also printed by
+``benchmarks/bench_vision_detection.py``). Command line: ``swarmloc vision-experiment NAME|all
+--runs 30 [--no-sharing | --both] [--report docs/vision]``
+(:func:`swarmloc.deploy.lab.vision.experiment.main`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from swarmloc.agents.vision.brain import (
+    VisionAgentConfig,
+    VisionBrain,
+    detections_from_blobs,
+)
+from swarmloc.agents.vision.detection import detect_blobs
+from swarmloc.config import ConfigError, apply_overrides, from_dict, load_toml, to_dict
+from swarmloc.protocol.keys import Keys
+from swarmloc.world.vision.camera import OBJECT_KINDS, CameraParams, make_object, render
+from swarmloc.world.vision.world import (
+    STOP,
+    FieldObject,
+    RobotStart,
+    VisionWorld,
+    VisionWorldConfig,
+)
+
+EXPERIMENTS = ("vision-exp1", "vision-exp2", "vision-exp3")
+#: Generator streams ``[seed, stream, ...]``: world 0 (``world/vision/world.py``), agents 1, layout 2,
+#: fault injection 3.
+AGENT_STREAM, LAYOUT_STREAM, FAULT_STREAM = 1, 2, 3
+TEAM = "A"
+
+
+# -- scenarios ----------------------------------------------------------------------------------
+
+
+def _range(name: str, value: tuple[float, float], lo: float | None = None) -> None:
+    a, b = value
+    if not (math.isfinite(a) and math.isfinite(b) and a <= b):
+        raise ValueError(f"{name}: expected [low, high] with low <= high, got {list(value)}")
+    if lo is not None and a < lo:
+        raise ValueError(f"{name}: values must be >= {lo}, got {list(value)}")
+
+
+@dataclass(frozen=True)
+class SetupConfig:
+    """Which experiment of seed 004 §IV, and the ranges its layouts are drawn from.
+
+    Robots start side by side, facing +x, ``spacing_m`` apart (plus ``position_jitter_m`` and
+    ``heading_jitter_rad``, uniform). Experiment 1: the ball ``ball_distance_m`` ahead of their
+    midpoint, ``ball_lateral_m`` to the side. Experiment 2: the obstacle ``obstacle_distance_m``
+    ahead, ``obstacle_lateral_m`` to one side (drawn), the ball ``ball_distance_m`` ahead and
+    ``ball_lateral_m`` to the other side. Experiment 3: the obstacle ``obstacle_distance_m`` ahead
+    at a fraction ``obstacle_between`` of the way from the white robot to the black one; the
+    ball ``ball_behind_m`` farther on the white robot's line of sight through the obstacle,
+    within ``hidden_angle_rad`` of it. Layouts where the two robots' distances to the obstacle
+    differ by less than ``min_assignment_gap_m`` are redrawn (the right goal would be a toss-up).
+    """
+
+    experiment: int = 1
+    duration_s: float = 40.0
+    reach_margin_m: float = 0.10
+    spacing_m: tuple[float, float] = (0.5, 0.7)
+    position_jitter_m: float = 0.03
+    heading_jitter_rad: float = 0.03
+    ball_distance_m: tuple[float, float] = (1.4, 2.0)
+    ball_lateral_m: tuple[float, float] = (-0.1, 0.1)
+    obstacle_distance_m: tuple[float, float] = (0.9, 1.2)
+    obstacle_lateral_m: tuple[float, float] = (0.1, 0.35)
+    obstacle_between: tuple[float, float] = (0.15, 0.85)
+    ball_behind_m: tuple[float, float] = (0.6, 0.9)
+    hidden_angle_rad: float = 0.03
+    min_assignment_gap_m: float = 0.08
+
+    def __post_init__(self) -> None:
+        if self.experiment not in (1, 2, 3):
+            raise ValueError(
+                f"experiment: must be 1, 2 or 3 (seed 004 §IV), got {self.experiment!r}"
+            )
+        if not self.duration_s > 0:
+            raise ValueError(f"duration_s: must be > 0, got {self.duration_s}")
+        for name in (
+            "reach_margin_m",
+            "position_jitter_m",
+            "heading_jitter_rad",
+            "hidden_angle_rad",
+            "min_assignment_gap_m",
+        ):
+            if not getattr(self, name) >= 0:
+                raise ValueError(f"{name}: must be >= 0, got {getattr(self, name)}")
+        for name in ("spacing_m", "ball_distance_m", "obstacle_distance_m", "ball_behind_m"):
+            _range(name, getattr(self, name), lo=0.0)
+        for name in ("ball_lateral_m", "obstacle_lateral_m"):
+            _range(name, getattr(self, name))
+        _range("obstacle_between", self.obstacle_between, lo=0.0)
+        if self.obstacle_between[1] > 1.0:
+            raise ValueError("obstacle_between: fractions must lie in [0, 1]")
+        if self.spacing_m[0] < 2 * OBJECT_KINDS["teammate"].radius_m + 2 * self.position_jitter_m:
+            raise ValueError("spacing_m: robots could start overlapping")
+
+
+@dataclass(frozen=True)
+class VisionScenario:
+    """A vision scenario (family ``"vision"``): the setup its layouts are drawn from, the world
+    without placements, the brains' configuration. :func:`world_config` makes a run's world."""
+
+    name: str = "custom"
+    description: str = ""
+    family: str = "vision"
+    setup: SetupConfig = field(default_factory=SetupConfig)
+    world: VisionWorldConfig = field(default_factory=VisionWorldConfig)
+    agent: VisionAgentConfig = field(default_factory=VisionAgentConfig)
+
+    def __post_init__(self) -> None:
+        if self.family != "vision":
+            raise ValueError(f"family: {self.family!r} is not a vision scenario")
+
+    def to_dict(self) -> dict:
+        return to_dict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict) -> VisionScenario:
+        return from_dict(cls, data)
+
+
+def _scenario_folder() -> Path:
+    return Path(str(resources.files("swarmloc.deploy") / "scenarios" / "vision"))
+
+
+def scenario_names() -> list[str]:
+    """The shipped vision scenarios."""
+    return sorted(p.stem for p in _scenario_folder().glob("vision-*.toml"))
+
+
+def load_vision_scenario(name_or_path: str, overrides: list[str] = ()) -> VisionScenario:
+    """A shipped vision scenario (by name) or a TOML file, with ``section.key=value`` overrides.
+
+    Placements come from ``[setup]``; ``world.robots``, ``world.objects`` and ``world.seed`` are
+    refused (the seed is the run's).
+    """
+    path = Path(name_or_path)
+    if path.suffix != ".toml":
+        if name_or_path not in scenario_names():
+            import difflib
+
+            close = difflib.get_close_matches(name_or_path, scenario_names(), n=1, cutoff=0.4)
+            hint = f"; did you mean '{close[0]}'?" if close else ""
+            raise ConfigError(
+                f"vision scenario '{name_or_path}': not shipped{hint} "
+                f"(shipped: {', '.join(scenario_names())})"
+            )
+        path = _scenario_folder() / f"{name_or_path}.toml"
+    data = apply_overrides(load_toml(path), list(overrides))
+    for key in ("robots", "objects", "seed"):
+        if key in data.get("world", {}):
+            raise ConfigError(
+                f"world.{key}: set by the layout and the run seed, not by the scenario"
+            )
+    return from_dict(VisionScenario, data)
+
+
+# -- layouts ------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Layout:
+    """One drawn layout: the world's placements and the ground truth the metrics need.
+
+    ``goals[i]``: robot i's correct goal by seed 004's rule on the true start positions;
+    ``blind``: index of the robot that cannot see the ball at the start (experiment 3) or -1;
+    ``variant``: "a" when robot 1 takes the obstacle, "b" when robot 0 does, "" in experiment 1.
+    """
+
+    robots: tuple[RobotStart, ...]
+    objects: tuple[FieldObject, ...]
+    goals: tuple[str, ...]
+    blind: int
+    variant: str
+
+
+def _visible(pose, pan_rad: float, objects, camera: CameraParams) -> set[str]:
+    """Colours the agent would use in a noise-free frame from ``pose`` (its own detections)."""
+    clean = dataclasses.replace(camera, noise_sigma=0.0, gain_min=1.0, gain_max=1.0)
+    image = render(pose, pan_rad, objects, clean, np.random.default_rng(0))
+    blobs = detect_blobs(image, clean)
+    return {d.colour for d in detections_from_blobs(blobs, 0, 0.0, pan_rad, clean)}
+
+
+def _any_pixel(pose, pan_rad: float, objects, kind: str, camera: CameraParams) -> bool:
+    """Whether any pixel of the ``kind`` object shows in a noise-free frame."""
+    clean = dataclasses.replace(camera, noise_sigma=0.0, gain_min=1.0, gain_max=1.0)
+    with_it = render(pose, pan_rad, objects, clean, np.random.default_rng(0))
+    without = render(
+        pose, pan_rad, [o for o in objects if o.kind != kind], clean, np.random.default_rng(0)
+    )
+    return bool(np.any(with_it != without))
+
+
+def _aim(pose, points) -> float:
+    """Head pan centring the bearings of ``points`` seen from ``pose``."""
+    bearings = [math.atan2(py - pose[1], px - pose[0]) - pose[2] for px, py in points]
+    bearings = [(b + math.pi) % (2 * math.pi) - math.pi for b in bearings]
+    return 0.5 * (min(bearings) + max(bearings))
+
+
+def layout(scenario: VisionScenario, seed: int, max_tries: int = 2000) -> Layout:
+    """Draw the layout of run ``seed`` (module docstring); ``RuntimeError`` if none fits."""
+    s = scenario.setup
+    camera = scenario.world.camera
+    rng = np.random.default_rng([seed, LAYOUT_STREAM])
+    body_r = scenario.world.body_radius_m
+    for _ in range(max_tries):
+        side = rng.choice([-1.0, 1.0])  # mirror image of the layout (which robot is on the left)
+        spacing = rng.uniform(*s.spacing_m)
+        jitter = rng.uniform(-s.position_jitter_m, s.position_jitter_m, (2, 2))
+        heading = rng.uniform(-s.heading_jitter_rad, s.heading_jitter_rad, 2)
+        starts = np.array([[0.0, side * spacing / 2], [0.0, -side * spacing / 2]]) + jitter
+        mid_y = float(starts[:, 1].mean())
+        if s.experiment == 1:
+            ball = (rng.uniform(*s.ball_distance_m), mid_y + rng.uniform(*s.ball_lateral_m))
+            objects = [make_object("ball", *ball)]
+            goals = ("ball", "ball")
+            blind, variant = -1, ""
+        elif s.experiment == 2:
+            obstacle_side = rng.choice([-1.0, 1.0])
+            obstacle = (
+                rng.uniform(*s.obstacle_distance_m),
+                obstacle_side * rng.uniform(*s.obstacle_lateral_m),
+            )
+            ball = (
+                rng.uniform(*s.ball_distance_m),
+                -obstacle_side * rng.uniform(*s.ball_lateral_m),
+            )
+            if math.hypot(ball[0] - obstacle[0], ball[1] - obstacle[1]) < 0.4:
+                continue
+            objects = [make_object("ball", *ball), make_object("obstacle", *obstacle)]
+            blind = -1
+        else:
+            white, black = starts[0], starts[1]
+            frac = rng.uniform(*s.obstacle_between)
+            obstacle = (
+                rng.uniform(*s.obstacle_distance_m),
+                white[1] + frac * (black[1] - white[1]),
+            )
+            ray = np.array(obstacle) - white
+            ray_len = float(np.hypot(*ray))
+            angle = math.atan2(ray[1], ray[0]) + rng.uniform(
+                -s.hidden_angle_rad, s.hidden_angle_rad
+            )
+            reach = ray_len + rng.uniform(*s.ball_behind_m)
+            ball = (white[0] + reach * math.cos(angle), white[1] + reach * math.sin(angle))
+            objects = [make_object("ball", *ball), make_object("obstacle", *obstacle)]
+            blind = 0
+        if s.experiment in (2, 3):
+            d = [math.hypot(obstacle[0] - p[0], obstacle[1] - p[1]) for p in starts]
+            if abs(d[0] - d[1]) < s.min_assignment_gap_m:
+                continue
+            nearest = int(np.argmin(d))
+            goals = tuple("obstacle" if i == nearest else "ball" for i in range(2))
+            variant = "a" if nearest == 1 else "b"
+        # Start poses and head pans: each robot looks at the middle of the objects.
+        robots, ok = [], True
+        points = [o.centre_m for o in objects]
+        for i in range(2):
+            pose = (float(starts[i, 0]), float(starts[i, 1]), float(heading[i]))
+            if blind == i:
+                pan = _aim(pose, [o.centre_m for o in objects if o.kind == "obstacle"])
+            else:
+                pan = _aim(pose, points)
+            if abs(pan) > camera.pan_limit_rad:
+                ok = False
+                break
+            others = [make_object("teammate", *starts[1 - i])]
+            seen = _visible(pose, pan, objects + others, camera)
+            wanted = {"pink"} | ({"orange"} if s.experiment in (2, 3) else set())
+            if blind == i:
+                wanted = {"orange"}
+                if _any_pixel(pose, pan, objects + others, "ball", camera):
+                    ok = False
+                    break
+            if not wanted <= seen:
+                ok = False
+                break
+            robots.append(RobotStart(pose[0], pose[1], pose[2], TEAM, float(pan)))
+        if not ok:
+            continue
+        solid = [(o.centre_m, o.radius_m) for o in objects if o.kind != "ball"]
+        if any(
+            math.hypot(c[0] - p[0], c[1] - p[1]) < r + body_r + 0.05
+            for c, r in solid
+            for p in starts
+        ):
+            continue
+        field_objects = tuple(FieldObject(o.kind, *o.centre_m) for o in objects)
+        return Layout(tuple(robots), field_objects, goals, blind, variant)
+    raise RuntimeError(
+        f"{scenario.name}: no layout satisfies the setup in {max_tries} draws "
+        f"(seed {seed}); widen the [setup] ranges"
+    )
+
+
+def world_config(scenario: VisionScenario, seed: int) -> tuple[VisionWorldConfig, Layout]:
+    """The world of run ``seed``: the scenario's world with the drawn layout and the seed (what
+    a world-server shell serves; the agents need only ``scenario.agent`` and their team)."""
+    lay = layout(scenario, seed)
+    world = dataclasses.replace(scenario.world, robots=lay.robots, objects=lay.objects, seed=seed)
+    return world, lay
+
+
+# -- the team channel ---------------------------------------------------------------------------
+
+
+class TeamChannel:
+    """In-process stand-in for the Zenoh keys ``swarmloc/<run>/team/<team>/blobs/<id>``.
+
+    Payloads published at tick k are delivered at tick k+1 to every other robot of the team, as
+    the bytes that were published.
+    """
+
+    def __init__(self, run: str, teams: list[str]):
+        self.keys = Keys(run)
+        self.teams = list(teams)
+        self._outbox: list[tuple[str, str, int, bytes]] = []
+        self.published = 0
+
+    def publish(self, robot_id: int, payload: bytes) -> str:
+        team = self.teams[robot_id]
+        key = self.keys.team_blobs(team, robot_id)
+        self._outbox.append((key, team, robot_id, bytes(payload)))
+        self.published += 1
+        return key
+
+    def deliver(self) -> list[list[tuple[int, bytes]]]:
+        """Per receiver, the ``(sender, payload)`` pairs published since the last delivery."""
+        inbox: list[list[tuple[int, bytes]]] = [[] for _ in self.teams]
+        for _key, team, sender, payload in self._outbox:
+            for receiver, receiver_team in enumerate(self.teams):
+                if receiver != sender and receiver_team == team:
+                    inbox[receiver].append((sender, payload))
+        self._outbox = []
+        return inbox
+
+
+# -- one run ------------------------------------------------------------------------------------
+
+
+@dataclass
+class RunRecord:
+    """What a run leaves for the figures: per tick the true poses and the estimates (world
+    frame, through the robot's true pose) of teammate and ball, NaN where unknown."""
+
+    layout: Layout
+    poses: list[np.ndarray] = field(default_factory=list)
+    teammate_world: list[np.ndarray] = field(default_factory=list)
+    ball_world: list[np.ndarray] = field(default_factory=list)
+    collision_points: list[tuple[float, float]] = field(default_factory=list)
+
+
+def _to_world(pose: np.ndarray, body_xy) -> np.ndarray:
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    return pose[:2] + np.array([c * body_xy[0] - s * body_xy[1], s * body_xy[0] + c * body_xy[1]])
+
+
+def _corrupt(payload: bytes, rng: np.random.Generator) -> bytes:
+    """Fault injection: a payload cut short, or one with flipped bytes."""
+    data = bytearray(payload)
+    if rng.random() < 0.5 or len(data) < 4:
+        return bytes(data[: len(data) // 3])
+    idx = rng.integers(0, len(data), size=max(1, len(data) // 50))
+    for i in idx:
+        data[i] ^= 0xFF
+    return bytes(data)
+
+
+def run_vision(
+    scenario: VisionScenario,
+    seed: int,
+    sharing: bool | None = None,
+    fault_rate: float = 0.0,
+    record: bool = False,
+    run: str = "vision",
+):
+    """Run one seeded replication; returns ``(metrics dict, RunRecord or None)``.
+
+    ``sharing`` overrides ``scenario.agent.sharing``. ``fault_rate``: probability that each image
+    and each payload is corrupted on its way (for tests of the error counting).
+    """
+    agent_cfg = (
+        scenario.agent if sharing is None else dataclasses.replace(scenario.agent, sharing=sharing)
+    )
+    wcfg, lay = world_config(scenario, seed)
+    world = VisionWorld(wcfg)
+    n = world.n_robots
+    teams = [r.team for r in lay.robots]
+    brains = [
+        VisionBrain(
+            i,
+            [j for j in range(n) if j != i and teams[j] == teams[i]],
+            agent_cfg,
+            wcfg.camera,
+            np.random.default_rng([seed, AGENT_STREAM, i]),
+        )
+        for i in range(n)
+    ]
+    channel = TeamChannel(run, teams)
+    faults = np.random.default_rng([seed, FAULT_STREAM])
+    body_r = wcfg.body_radius_m
+    ball_xy = next((o.x_m, o.y_m) for o in lay.objects if o.kind == "ball")
+    goal_xy = {o.kind: np.array([o.x_m, o.y_m]) for o in lay.objects}
+    reach_m = [body_r + OBJECT_KINDS[g].radius_m + scenario.setup.reach_margin_m for g in lay.goals]
+    reach_time: list[float | None] = [None] * n
+    n_ticks = round(scenario.setup.duration_s / wcfg.tick_s)
+    teammate_err: list[list[float]] = [[] for _ in range(n)]
+    ball_err: list[list[float]] = [[] for _ in range(n)]
+    relayed_err: list[float] = []
+    ticks_known_teammate = np.zeros(n, dtype=int)
+    ticks_known_ball = np.zeros(n, dtype=int)
+    blind_first_ball_s: float | None = None
+    bad_images = bad_payloads = 0
+    commands = [STOP] * n
+    all_reached_since: float | None = None
+    rec = RunRecord(lay) if record else None
+    t_cpu = time.process_time()
+    tick = 0
+    for tick in range(n_ticks):
+        observations = world.observe()
+        for receiver, messages in enumerate(channel.deliver()):
+            for sender, payload in messages:
+                if fault_rate and faults.random() < fault_rate:
+                    payload = _corrupt(payload, faults)
+                try:
+                    brains[receiver].receive(sender, payload)
+                except ValueError:
+                    bad_payloads += 1
+        for i, (brain, obs) in enumerate(zip(brains, observations)):
+            if fault_rate and faults.random() < fault_rate:
+                obs = dataclasses.replace(obs, image=_corrupt(obs.image, faults))
+            try:
+                commands[i] = brain.step(obs)
+            except ValueError:
+                bad_images += 1  # keeps its previous command
+        collisions_before = world.robot_collisions
+        # Ground truth and the brains' estimates.
+        for i, brain in enumerate(brains):
+            est = brain.estimates()
+            for j, xy in est.teammates.items():
+                truth = world.relative_position(i, world.pose[j, :2])
+                teammate_err[i].append(float(np.hypot(*(np.asarray(xy) - truth))))
+            ticks_known_teammate[i] += bool(est.teammates)
+            if est.ball is not None:
+                err = float(np.hypot(*(np.asarray(est.ball) - world.relative_position(i, ball_xy))))
+                ball_err[i].append(err)
+                ticks_known_ball[i] += 1
+                if i == lay.blind and est.ball_source == "teammate":
+                    relayed_err.append(err)
+                if i == lay.blind and blind_first_ball_s is None:
+                    blind_first_ball_s = round(world.time_s, 3)
+            if (
+                reach_time[i] is None
+                and np.hypot(*(world.pose[i, :2] - goal_xy[lay.goals[i]])) <= reach_m[i]
+            ):
+                reach_time[i] = round(world.time_s, 3)
+            if rec is not None:
+                tm = next(iter(est.teammates.values()), None)
+                rec.teammate_world.append(
+                    np.full(2, np.nan) if tm is None else _to_world(world.pose[i], tm)
+                )
+                rec.ball_world.append(
+                    np.full(2, np.nan) if est.ball is None else _to_world(world.pose[i], est.ball)
+                )
+        if rec is not None:
+            rec.poses.append(world.pose.copy())
+        for i, brain in enumerate(brains):
+            payload = brain.share()
+            if payload is not None:
+                channel.publish(i, payload)
+        world.step(commands)
+        if rec is not None and world.robot_collisions > collisions_before:
+            rec.collision_points.append(tuple(world.pose[:, :2].mean(axis=0)))
+        if all(b.reached for b in brains):
+            all_reached_since = world.time_s if all_reached_since is None else all_reached_since
+            if world.time_s - all_reached_since >= 1.0:
+                break
+        else:
+            all_reached_since = None
+    for i in range(n):  # the last move
+        if (
+            reach_time[i] is None
+            and np.hypot(*(world.pose[i, :2] - goal_xy[lay.goals[i]])) <= reach_m[i]
+        ):
+            reach_time[i] = world.time_s
+    goals = [b.goal for b in brains]
+
+    def _median(values):
+        return round(float(np.median(values)), 4) if len(values) else None
+
+    def _p90(values):
+        return round(float(np.percentile(values, 90)), 4) if len(values) else None
+
+    all_teammate = [e for errs in teammate_err for e in errs]
+    all_ball = [e for errs in ball_err for e in errs]
+    ticks = tick + 1
+    metrics = {
+        "experiment": scenario.setup.experiment,
+        "scenario": scenario.name,
+        "sharing": agent_cfg.sharing,
+        "seed": seed,
+        "variant": lay.variant,
+        "collisions": world.robot_collisions,
+        "contact_s": round(world.robot_contact_ticks * wcfg.tick_s, 3),
+        "obstacle_collisions": world.obstacle_collisions,
+        "goals_correct": all(g == t for g, t in zip(goals, lay.goals)),
+        "goals": "/".join(str(g) for g in goals),
+        "true_goals": "/".join(lay.goals),
+        "reach_s_0": reach_time[0],
+        "reach_s_1": reach_time[1] if n > 1 else None,
+        "all_reached": all(t is not None for t in reach_time),
+        "all_reached_s": max(reach_time) if all(t is not None for t in reach_time) else None,
+        "teammate_err_median_m": _median(all_teammate),
+        "teammate_err_p90_m": _p90(all_teammate),
+        "teammate_known_fraction": round(float(ticks_known_teammate.sum()) / (n * ticks), 4),
+        "ball_err_median_m": _median(all_ball),
+        "ball_known_fraction": round(float(ticks_known_ball.sum()) / (n * ticks), 4),
+        "blind_ball_first_s": blind_first_ball_s,
+        "blind_relayed_ball_err_median_m": _median(relayed_err),
+        "bad_images": bad_images,
+        "bad_payloads": bad_payloads,
+        "payloads": channel.published,
+        "sim_s": round(world.time_s, 2),
+        "cpu_s": round(time.process_time() - t_cpu, 3),
+    }
+    return metrics, rec
