@@ -208,7 +208,7 @@ class DaskExecutor:
                   flush=True)
         futures = [self._client.submit(fn, job, pure=False) for job in jobs]
         self._futures = dict(zip(futures, jobs))
-        for fut in self._distributed.as_completed(futures):
+        for fut in self._distributed.as_completed(futures, loop=self._client.loop):
             yield self._futures[fut], fut
 
     def stop(self) -> None:
