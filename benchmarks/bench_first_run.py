@@ -49,8 +49,8 @@ def main() -> int:
     subprocess.run(["git", "clone", "-q", str(REPO), str(clone)], check=True)
     head = subprocess.run(["git", "-C", str(clone), "rev-parse", "--short", "HEAD"],
                           capture_output=True, text=True, check=True).stdout.strip()
-    install_s, _ = _timed(["bash", "-c", "python3 -m venv .venv && . .venv/bin/activate && "
-                                         "pip install -q -e '.[test]'"], cwd=clone, env=env)
+    install_s, _ = _timed(["bash", "-c", ("python3 -m venv .venv && . .venv/bin/activate && "
+                                          "pip install -q -e '.[test]'")], cwd=clone, env=env)
     print(f"fresh clone of {head} in {top}; install {install_s:.0f} s (pip's cache kept)")
     rows = []
     for i in range(1 + args.repeat):
@@ -62,7 +62,7 @@ def main() -> int:
                      trips.group(1) if trips else "?"))
     print(f"{'run':6s} {'wall s':>7s}  {'compiled':8s} {'ticks/s':>8s} {'round trips':>11s}")
     for name, wall, compiled, ticks, trips in rows:
-        print(f"{name:6s} {wall:7.1f}  {str(compiled):8s} {ticks:>8s} {trips:>11s}")
+        print(f"{name:6s} {wall:7.1f}  {compiled!s:8s} {ticks:>8s} {trips:>11s}")
     cold, warm = rows[0][1], min(r[1] for r in rows[1:]) if rows[1:] else float("nan")
     print(f"targets: cold {cold:.0f} s (<= 90), warm {warm:.0f} s (<= 20)")
     if not args.keep:

@@ -329,6 +329,9 @@ def build_parser() -> argparse.ArgumentParser:
     experiment.add_parser(sub)
     report.add_parser(sub)
     warm.add_parser(sub)
+    from swarmloc.protocol import tls
+
+    tls.add_parser(sub)
 
     p = sub.add_parser("laser-experiment",
                        help="run the laser experiments of seeds 002-003 and write their report")

@@ -11,7 +11,9 @@ them into a ``zenoh.Config`` with the settings that ZENOH.md measured to matter:
 - a client that connects to explicit endpoints waits for its router (``connect/timeout_ms: -1``)
   instead of failing at once when the router is not up yet;
 - a session that listens has its (read-only) admin space enabled, so that
-  :func:`bound_endpoints` can read the port it actually got for ``tcp/127.0.0.1:0``.
+  :func:`bound_endpoints` can read the port it actually got for ``tcp/127.0.0.1:0``;
+- a session with a ``tls/`` endpoint has its certificates checked first
+  (:func:`swarmloc.protocol.tls.check_tls`): Zenoh only says "Unable to connect".
 
 Explicit arguments override the config file; an argument left at None leaves the file's value.
 """
@@ -158,7 +160,25 @@ def session_config(
         and json.loads(config.get_json("connect/timeout_ms")) is None
     ):
         _insert(config, "connect/timeout_ms", -1)
+    if _uses_tls(config):
+        from swarmloc.protocol.tls import check_tls
+
+        try:
+            check_tls(config)
+        except ValueError as exc:
+            raise ValueError(f"-c/--config: {exc}") from None
     return config
+
+
+def _uses_tls(config: zenoh.Config) -> bool:
+    """Whether a connect or listen endpoint is ``tls/...`` (Zenoh reads the TLS files then)."""
+    for key in ("connect/endpoints", "listen/endpoints"):
+        endpoints = json.loads(config.get_json(key)) or []
+        if isinstance(endpoints, dict):
+            endpoints = [e for side in endpoints.values() for e in side or []]
+        if any(str(e).startswith("tls/") for e in endpoints):
+            return True
+    return False
 
 
 def _insert(config: zenoh.Config, key: str, value: object) -> None:

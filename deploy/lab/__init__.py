@@ -3,6 +3,7 @@
 :mod:`~swarmloc.deploy.lab.experiment` is the experiment engine (``swarmloc experiment``: a spec's
 grid of settings, seeded replications in a pool of processes, resumable results); the report
 engine's family-free parts are :mod:`~swarmloc.deploy.lab.report`; :mod:`~swarmloc.deploy.lab.netns`
-builds a multi-host lab in Linux network namespaces. Each robot family's runner, experiment hooks
+builds a multi-host lab in Linux network namespaces; :mod:`~swarmloc.deploy.lab.executors` runs an
+experiment's jobs on the local process pool or a Dask cluster. Each robot family's runner, experiment hooks
 and report templates sit in its own folder (``epuck/``, ``laser/``, ``vision/``, ``replay/``).
 """

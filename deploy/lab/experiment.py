@@ -22,7 +22,8 @@ with seed ``seed + r``::
 Every setting's scenario is built and validated before anything runs (:func:`plan`), so an unknown
 key, an unknown strategy or an impossible value stops the command with a message naming the group
 and setting. Jobs (one replication of one setting) run with the batch engine in a pool of spawned
-processes (never fork: a forked child of a Zenoh process hangs). Each finished job appends one row
+processes (never fork: a forked child of a Zenoh process hangs), or on the workers of a Dask
+cluster (``--executor dask --scheduler tcp://HOST:8786``, ``deploy/lab/executors.py``). Each finished job appends one row
 to a CSV file with one write call, so an interrupt loses nothing finished and leaves no partial
 row; running the same command again skips the (setting, seed) pairs already in the file.
 Columns (:meth:`ExperimentSpec.columns`): the setting (experiment, group, setting, scenario,
@@ -46,29 +47,29 @@ import importlib
 import io
 import itertools
 import json
-import multiprocessing
 import os
 import re
-import signal
 import sys
 import time
-from collections.abc import Iterator
-from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
-from contextlib import contextmanager
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 from typing import Any
 
 from swarmloc.config import ConfigError, from_dict, load_toml
+from swarmloc.deploy.lab.executors import (
+    DEFAULT_SCHEDULER_TIMEOUT_S,
+    EXECUTORS,
+    Executor,
+    make_executor,
+    sigterm_as_interrupt,
+)
 from swarmloc.deploy.scenario import Scenario, load_scenario
 
 _NAME = re.compile(r"^[A-Za-z0-9_-]+$")
 _DOTTED_KEY = re.compile(r"^[A-Za-z_]\w*(\.[A-Za-z_]\w*)+$")
 #: Keys a group may not set: the seed comes from the spec's ``seed`` and the replication.
 _RESERVED_KEYS = ("world.seed",)
-#: Thread pools of numerical libraries: one thread per worker, the pool is the parallelism.
-_THREAD_VARS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
 
 #: Columns of the results file before the grid keys and after them.
 LEAD_COLUMNS = ("experiment", "group", "setting", "scenario", "strategy", "beta", "robots",
@@ -381,18 +382,17 @@ def plan(spec: ExperimentSpec) -> list[Job]:
 # -- one job, in a worker process -------------------------------------------------------------
 
 
-def _init_worker() -> None:
-    # Ctrl-C reaches the whole process group: the parent alone handles it and stops the workers.
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-
-
 def run_job(job: Job) -> dict:
     """Run one replication with the batch engine; a flat dict of what the row needs."""
     module = _family(job.family)
     if module is not None:
         return module.run_job(job)
     from swarmloc.deploy.lab.epuck.batch import run_batch
+    from swarmloc.deploy.warm import ensure_compiled
 
+    # On a cluster worker's host nobody compiled yet: one process compiles, the others of the
+    # host wait on its lock (a stamp check of a few ms once warm).
+    ensure_compiled()
     t0 = time.perf_counter()
     scenario = load_scenario(job.scenario, list(job.overrides))
     result = run_batch(scenario)
@@ -556,35 +556,6 @@ def _progress_mode(progress: bool | str) -> str | None:
 # -- running ----------------------------------------------------------------------------------
 
 
-@contextmanager
-def _one_thread_per_worker() -> Iterator[None]:
-    """Spawned workers inherit the environment when they start: one BLAS thread each."""
-    saved = {k: os.environ.get(k) for k in _THREAD_VARS}
-    os.environ.update({k: "1" for k in _THREAD_VARS})
-    try:
-        yield
-    finally:
-        for k, v in saved.items():
-            if v is None:
-                os.environ.pop(k, None)
-            else:
-                os.environ[k] = v
-
-
-def _stop_pool(executor: ProcessPoolExecutor, futures) -> None:
-    for f in futures:
-        f.cancel()
-    # The executor has no public way to stop running jobs: terminate the workers it started,
-    # by their own handles (they ignore SIGINT), then let it shut down.
-    processes = list((getattr(executor, "_processes", None) or {}).values())
-    executor.shutdown(wait=False, cancel_futures=True)
-    for p in processes:
-        if p.is_alive():
-            p.terminate()
-    for p in processes:
-        p.join(timeout=5)
-
-
 def execution_order(jobs: list[Job]) -> list[Job]:
     """Replication-major (an interrupted experiment has every setting's first replications), the
     costliest jobs first within a replication (short jobs fill the pool at the end)."""
@@ -597,14 +568,22 @@ def run_experiment(
     workers: int | None = None,
     progress: bool | str = True,
     limit: int | None = None,
+    executor: str | Executor = "local",
+    scheduler: str | None = None,
+    scheduler_timeout_s: float = DEFAULT_SCHEDULER_TIMEOUT_S,
 ) -> int:
     """Run every job of ``spec`` not yet in ``results_path`` and append one row per job; return
     the number of rows written.
 
-    ``workers`` processes (default: ``os.cpu_count()``), spawned. ``progress``: True shows a
-    rich bar when stderr is a terminal and otherwise a line every ~10 %; "bar" or "lines" force
-    one; False shows nothing. ``limit``: run at most that many new jobs. On KeyboardInterrupt
-    the workers are stopped, finished rows stay in the file, and the exception propagates.
+    ``executor``: ``"local"`` runs ``workers`` spawned processes (default: ``os.cpu_count()``);
+    ``"dask"`` runs the jobs on the workers of the Dask scheduler at ``scheduler``
+    (``tcp://HOST:8786``); an :class:`~swarmloc.deploy.lab.executors.Executor` instance is used
+    as it is. Whichever runs them, this process writes the rows as the jobs come back (one write
+    call per row, each (setting, seed) once). ``progress``: True shows a rich bar when stderr is
+    a terminal and otherwise a line every ~10 %; "bar" or "lines" force one; False shows nothing.
+    ``limit``: run at most that many new jobs. A bad scheduler address or a scheduler that does
+    not answer raises ConfigError before the results file is touched. On KeyboardInterrupt the
+    jobs are stopped, finished rows stay in the file, and the exception propagates.
     """
     jobs = plan(spec)
     path = Path(results_path)
@@ -612,54 +591,54 @@ def run_experiment(
     todo = execution_order([j for j in jobs if (j.setting, j.seed) not in done])
     if limit is not None:
         todo = todo[: max(0, limit)]
-    workers = (os.cpu_count() or 1) if workers is None else workers
-    if workers < 1:
-        raise ConfigError(f"workers: must be >= 1, got {workers}")
+    if isinstance(executor, str):
+        if executor == "local" and workers is not None and workers < 1:
+            raise ConfigError(f"workers: must be >= 1, got {workers}")
+        executor = make_executor(executor, workers=workers, scheduler=scheduler,
+                                 scheduler_timeout_s=scheduler_timeout_s) if todo else None
     mode = _progress_mode(progress)
     path.parent.mkdir(parents=True, exist_ok=True)
     new_file = not path.exists() or path.stat().st_size == 0
     written = 0
-    with open(path, "ab", buffering=0) as handle:
-        if new_file:
-            handle.write(_csv_line(spec.columns()))
-        if not todo:
-            return 0
-        if spec.family == "epuck":
-            # Compile once here, not in every worker at once (deploy/warm.py).
-            from swarmloc.deploy.warm import ensure_compiled
+    seen: set[tuple[str, int]] = set()
+    try:
+        with open(path, "ab", buffering=0) as handle:
+            if new_file:
+                handle.write(_csv_line(spec.columns()))
+            if not todo:
+                return 0
+            if spec.family == "epuck" and executor.on_this_host:
+                # Compile once here, not in every worker at once (deploy/warm.py).
+                from swarmloc.deploy.warm import ensure_compiled
 
-            ensure_compiled(lambda line: print(f"swarmloc: {line}", file=sys.stderr, flush=True)
-                            if mode else None)
-        bar = _Progress(mode, spec.name, len(todo), sum(j.cost for j in todo),
-                        min(workers, len(todo)), len(done))
-        try:
-            with _one_thread_per_worker():
-                executor = ProcessPoolExecutor(
-                    max_workers=min(workers, len(todo)),
-                    mp_context=multiprocessing.get_context("spawn"), initializer=_init_worker)
-                futures: dict[Future, Job] = {}
-                try:
-                    futures = {executor.submit(run_job, job): job for job in todo}
-                    pending = set(futures)
-                    while pending:
-                        finished, pending = wait(pending, return_when=FIRST_COMPLETED)
-                        for fut in finished:
-                            job = futures[fut]
-                            try:
-                                out = fut.result()
-                            except Exception as exc:
-                                raise RuntimeError(f"job {job.setting} seed {job.seed} failed: "
-                                                   f"{type(exc).__name__}: {exc}") from exc
-                            # One write call per row on an unbuffered append-mode file.
-                            handle.write(_csv_line(_row(spec, job, out)))
-                            written += 1
-                            bar.advance(job.cost)
-                except BaseException:
-                    _stop_pool(executor, futures)
-                    raise
-                executor.shutdown(wait=True)
-        finally:
-            bar.close()
+                ensure_compiled(lambda line: print(f"swarmloc: {line}", file=sys.stderr, flush=True)
+                                if mode else None)
+            bar = _Progress(mode, spec.name, len(todo), sum(j.cost for j in todo),
+                            min(executor.workers(), len(todo)), len(done))
+            try:
+                for job, fut in executor.as_completed(run_job, todo):
+                    key = (job.setting, job.seed)
+                    if key in seen:  # an executor handed the same job back twice: one row only
+                        continue
+                    try:
+                        out = fut.result()
+                    except Exception as exc:
+                        raise RuntimeError(f"job {job.setting} seed {job.seed} failed: "
+                                           f"{type(exc).__name__}: {exc}") from exc
+                    # One write call per row on an unbuffered append-mode file.
+                    handle.write(_csv_line(_row(spec, job, out)))
+                    seen.add(key)
+                    written += 1
+                    bar.advance(job.cost)
+            except BaseException:
+                executor.stop()
+                raise
+            finally:
+                bar.close()
+            executor.close()
+    finally:
+        if executor is not None:
+            executor.close()
     return written
 
 
@@ -701,7 +680,10 @@ def main_experiment(args) -> int:
         return 0
     t0 = time.perf_counter()
     try:
-        written = run_experiment(spec, out, workers=args.workers, progress=not args.quiet)
+        with sigterm_as_interrupt():
+            written = run_experiment(spec, out, workers=args.workers, progress=not args.quiet,
+                                     executor=args.executor, scheduler=args.scheduler,
+                                     scheduler_timeout_s=args.scheduler_timeout_s)
     except KeyboardInterrupt:
         print(f"\ninterrupted: finished replications are in {out}; "
               f"run the same command again to resume", file=sys.stderr)
@@ -727,6 +709,13 @@ def add_parser(subparsers) -> None:
     p.add_argument("--replications", type=int, default=None, help="replications per setting")
     p.add_argument("--dry-run", action="store_true", help="print the plan; run nothing")
     p.add_argument("--quiet", action="store_true", help="no progress output")
+    p.add_argument("--executor", choices=EXECUTORS, default="local",
+                   help="where jobs run: local (a pool of --workers processes, the default) or "
+                        "dask (the workers of --scheduler; pip install 'swarmloc[cluster]')")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="Dask scheduler address for --executor dask, e.g. tcp://HOST:8786")
+    p.add_argument("--scheduler-timeout-s", type=float, default=DEFAULT_SCHEDULER_TIMEOUT_S,
+                   help="give up if the scheduler does not answer within this (default 10 s)")
     p.set_defaults(func=main_experiment)
 
 

@@ -1,0 +1,245 @@
+"""``swarmloc experiment --executor dask`` on a local Dask cluster of real processes (a scheduler
+and two workers started by the test, 127.0.0.1, ports chosen by the OS, ``tests/dask_cluster.py``):
+its rows equal the local pool's (every column but :data:`TIMING_COLUMNS`), a worker killed with
+SIGKILL mid-run leaves every row present exactly once, an interrupted client resumes, and a bad
+or unreachable scheduler stops the command (exit 2, the problem named) with no row lost.
+
+Mid-run moments are observed, not slept for: the test waits for the client's first row in the
+results file (each row is one write call) before it kills or interrupts.
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+import signal
+import socket
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import pytest
+from dask_cluster import LocalDaskCluster
+
+from swarmloc.deploy.cli import main as swarmloc_main
+from swarmloc.deploy.lab.executors import TIMING_COLUMNS, check_scheduler_address
+from swarmloc.deploy.lab.experiment import load_spec, plan, run_experiment
+
+pytestmark = pytest.mark.integration
+
+pytest.importorskip("distributed")
+
+#: A smoke spec: ES1 at 30 simulated seconds, two strategies, two replications (4 jobs).
+SMALL = """\
+name = "small"
+replications = {replications}
+seed = 1
+[[group]]
+name = "g"
+scenarios = ["ES1"]
+duration_s = {duration}
+[group.grid]
+"agent.strategy" = ["NC", "SSGIKF"]
+"""
+
+
+def _spec(tmp_path: Path, replications: int = 2, duration: float = 30.0) -> Path:
+    path = tmp_path / f"small-{replications}-{duration:g}.toml"
+    path.write_text(textwrap.dedent(SMALL.format(replications=replications, duration=duration)))
+    return path
+
+
+def _rows(path: Path) -> list[dict]:
+    with open(path, newline="") as handle:
+        return list(csv.DictReader(handle))
+
+
+def _model_columns(rows: list[dict]) -> list[tuple]:
+    """Each row without its timing columns, sorted by (setting, seed)."""
+    return sorted(tuple((k, v) for k, v in r.items() if k not in TIMING_COLUMNS) for r in rows)
+
+
+def _keys(rows: list[dict]) -> list[tuple[str, int]]:
+    return sorted((r["setting"], int(r["seed"])) for r in rows)
+
+
+def _planned(spec_path: Path) -> list[tuple[str, int]]:
+    return sorted((j.setting, j.seed) for j in plan(load_spec(spec_path)))
+
+
+def _client(spec: Path, out: Path, address: str) -> subprocess.Popen:
+    """``swarmloc experiment`` on the cluster, as its own process (progress lines on stderr)."""
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    return subprocess.Popen([sys.executable, "-m", "swarmloc.deploy.cli", "experiment", str(spec),
+                             "--out", str(out), "--executor", "dask", "--scheduler", address],
+                            stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env=env, start_new_session=True)
+
+
+def _wait_for_rows(out: Path, n: int, proc: subprocess.Popen, timeout_s: float = 120.0) -> None:
+    """Until the results file holds ``n`` complete rows (header aside) or the client ended."""
+    end = time.monotonic() + timeout_s
+    while time.monotonic() < end:
+        if out.exists() and out.read_bytes().count(b"\n") >= n + 1:
+            return
+        if proc.poll() is not None:
+            raise AssertionError(f"client ended early ({proc.returncode}): {proc.stderr.read()}")
+        time.sleep(0.01)  # polling a file that the client appends to; not a readiness guess
+    raise AssertionError(f"fewer than {n} rows after {timeout_s} s")
+
+
+def _stop(proc: subprocess.Popen) -> tuple[str, str]:
+    try:
+        return proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(timeout=10)
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    with LocalDaskCluster(workers=2) as running:
+        yield running
+
+
+def test_dask_rows_equal_local_rows(tmp_path, cluster):
+    spec_path = _spec(tmp_path)
+    spec = load_spec(spec_path)
+    local, dask = tmp_path / "local.csv", tmp_path / "dask.csv"
+    assert run_experiment(spec, local, workers=2, progress=False) == 4
+    assert run_experiment(spec, dask, progress=False, executor="dask",
+                          scheduler=cluster.address) == 4
+    assert local.read_text().splitlines()[0] == dask.read_text().splitlines()[0]
+    assert _keys(_rows(dask)) == _planned(spec_path)
+    assert _model_columns(_rows(dask)) == _model_columns(_rows(local))
+    # Resume is the same too: nothing left to run.
+    assert run_experiment(spec, dask, progress=False, executor="dask",
+                          scheduler=cluster.address) == 0
+
+
+def test_cli_shows_progress_and_time_left(tmp_path, cluster):
+    spec_path, out = _spec(tmp_path), tmp_path / "out.csv"
+    proc = _client(spec_path, out, cluster.address)
+    stdout, stderr = _stop(proc)
+    assert proc.returncode == 0, stderr
+    assert "4 jobs to run on 2 workers" in stderr
+    assert "4/4 jobs (100 %)" in stderr and "left" in stderr
+    assert "4 new rows" in stdout
+    assert _keys(_rows(out)) == _planned(spec_path)
+
+
+def test_worker_killed_mid_run_leaves_every_row_exactly_once(tmp_path):
+    """Its own cluster (the killed worker is gone for good): 12 jobs of ~1 s; once the first row
+    is in and the scheduler says the victim is processing a job, it is killed with SIGKILL; the
+    scheduler runs its job again on the other, and the file ends with every (setting, seed)
+    once, equal to a local run."""
+    import distributed
+
+    spec_path, out = _spec(tmp_path, replications=6, duration=1800.0), tmp_path / "out.csv"
+    with LocalDaskCluster(workers=2) as own:
+        proc = _client(spec_path, out, own.address)
+        try:
+            _wait_for_rows(out, 1, proc)
+            victim = own.worker_procs[0]
+            victim_address = own.worker_address[victim.pid]
+            with distributed.Client(own.address, timeout=10, set_as_default=False) as watcher:
+                end = time.monotonic() + 60
+                while not watcher.processing(workers=[victim_address]).get(victim_address):
+                    assert time.monotonic() < end, "the victim never held a job"
+                    time.sleep(0.01)  # polling the scheduler's own view
+                own.kill_worker(victim)
+            assert victim.returncode == -signal.SIGKILL
+        finally:
+            _stdout, stderr = _stop(proc)
+        assert f"Remove worker addr: {victim_address}" in own.log(own.scheduler)
+        assert proc.returncode == 0, stderr
+        rows = _rows(out)
+        assert _keys(rows) == _planned(spec_path)  # every row, none twice
+        assert own.worker_procs[1].poll() is None
+    local = tmp_path / "local.csv"
+    run_experiment(load_spec(spec_path), local, workers=2, progress=False)
+    assert _model_columns(rows) == _model_columns(_rows(local))
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_interrupted_client_resumes_with_every_row_once(tmp_path, cluster, sig):
+    spec_path, out = _spec(tmp_path, replications=6, duration=1800.0), tmp_path / "out.csv"
+    proc = _client(spec_path, out, cluster.address)
+    try:
+        _wait_for_rows(out, 1, proc)
+        proc.send_signal(sig)
+    finally:
+        _, stderr = _stop(proc)
+    assert proc.returncode == 130, stderr
+    assert "run the same command again to resume" in stderr
+    before = out.read_bytes()
+    first = _rows(out)
+    assert 1 <= len(first) < 12 and len(set(_keys(first))) == len(first)
+
+    again = _client(spec_path, out, cluster.address)
+    stdout, stderr = _stop(again)
+    assert again.returncode == 0, stderr
+    assert f"{12 - len(first)} new rows" in stdout
+    assert out.read_bytes().startswith(before)  # nothing written before is lost or changed
+    assert _keys(_rows(out)) == _planned(spec_path)
+
+
+# -- bad input --------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(("address", "message"), [
+    ("127.0.0.1:8786", r"not a Dask scheduler address \(did you mean tcp://127\.0\.0\.1:8786\?\)"),
+    ("tcp://127.0.0.1", "not a Dask scheduler address"),
+    ("tcp://127.0.0.1:99999", "port 99999 is not in 1..65535"),
+    ("http://host:8786", "not a Dask scheduler address"),
+    ("tcp://bad host:8786", "not a Dask scheduler address"),
+])
+def test_malformed_scheduler_address_is_refused(address, message):
+    from swarmloc.config import ConfigError
+
+    with pytest.raises(ConfigError, match=message):
+        check_scheduler_address(address)
+
+
+def _results_with_rows(tmp_path: Path, spec_path: Path) -> Path:
+    out = tmp_path / "out.csv"
+    run_experiment(load_spec(spec_path), out, workers=1, progress=False, limit=2)
+    assert len(_rows(out)) == 2
+    return out
+
+
+@pytest.mark.parametrize("case", ["malformed", "unreachable", "no-scheduler", "scheduler-for-local"])
+def test_bad_scheduler_stops_the_command_and_loses_no_row(tmp_path, capsys, case):
+    spec_path = _spec(tmp_path)
+    out = _results_with_rows(tmp_path, spec_path)
+    before = out.read_bytes()
+    holder = None
+    if case == "malformed":
+        flags, message = ["--executor", "dask", "--scheduler", "tcp:/127.0.0.1:8786"], \
+            "--scheduler 'tcp:/127.0.0.1:8786': not a Dask scheduler address"
+    elif case == "unreachable":
+        # A port that is bound (so nobody else takes it) but never listens: connections refused.
+        holder = socket.socket()
+        holder.bind(("127.0.0.1", 0))
+        address = f"tcp://127.0.0.1:{holder.getsockname()[1]}"
+        flags = ["--executor", "dask", "--scheduler", address, "--scheduler-timeout-s", "2"]
+        message = f"--scheduler {address}: no Dask scheduler answered within 2 s"
+    elif case == "no-scheduler":
+        flags, message = ["--executor", "dask"], "--executor dask needs --scheduler ADDRESS"
+    else:
+        flags, message = ["--scheduler", "tcp://127.0.0.1:8786"], "--scheduler is for --executor dask"
+    try:
+        assert swarmloc_main(["experiment", str(spec_path), "--out", str(out), *flags]) == 2
+    finally:
+        if holder is not None:
+            holder.close()
+    assert message in capsys.readouterr().err
+    assert out.read_bytes() == before  # not one byte written or lost
+    # And a fresh file is not even created.
+    fresh = tmp_path / "fresh.csv"
+    if case != "scheduler-for-local":
+        assert swarmloc_main(["experiment", str(spec_path), "--out", str(fresh), *flags]) == 2
+        assert not fresh.exists()
