@@ -1,0 +1,148 @@
+"""Registries: things chosen by name (robot families, strategies, localizers, ...), and plugins.
+
+One mechanism for every kind (STYLE.md: plugins chosen by name from a registry that rejects
+duplicates, not from if-chains). A :class:`Registry` maps names to entries; registering a name
+twice is an error, and asking for an unknown name suggests the closest registered one. An entry
+may be the object itself or a ``"module:attribute"`` path, imported on first use, so that
+registering costs no import (a laser agent never imports the vision stack).
+
+Plugins add entries from outside the package: a module that, when imported, calls ``register``
+on the registries it extends. swarmloc imports, in every process that chooses by name (``swarmloc
+run`` and every piece it starts, ``swarmloc experiment`` and its workers):
+
+- the modules named by installed packages under the entry-point group ``swarmloc.plugins``
+  (``[project.entry-points."swarmloc.plugins"] my_rule = "my_package.my_rule"``);
+- the modules and files listed in ``SWARMLOC_PLUGINS`` (``os.pathsep``-separated; a path ending in
+  ``.py`` is imported as a file), which ``--plugin`` on the command line sets so that child
+  processes inherit it.
+
+``docs/extending.md`` walks through a complete plugin (``examples/``).
+"""
+
+from __future__ import annotations
+
+import difflib
+import importlib
+import importlib.util
+import os
+import sys
+from collections.abc import Iterator
+from importlib.metadata import entry_points
+from pathlib import Path
+from typing import Any, Generic, TypeVar
+
+T = TypeVar("T")
+
+#: The environment variable listing plugin modules or files (``os.pathsep``-separated).
+PLUGINS_ENV = "SWARMLOC_PLUGINS"
+#: The entry-point group of installed plugins.
+PLUGINS_GROUP = "swarmloc.plugins"
+
+
+def resolve(target: Any) -> Any:
+    """A ``"module:attribute.path"`` string imported (on each call; Python caches modules), or
+    the object itself."""
+    if not isinstance(target, str):
+        return target
+    module, _, path = target.partition(":")
+    obj: Any = importlib.import_module(module)
+    for part in filter(None, path.split(".")):
+        obj = getattr(obj, part)
+    return obj
+
+
+class Registry(Generic[T]):
+    """Entries of one kind, by name. ``kind`` names them in errors ("strategy", "algorithm")."""
+
+    def __init__(self, kind: str) -> None:
+        self.kind = kind
+        self._entries: dict[str, T] = {}
+
+    def register(self, name: str, entry: T) -> T:
+        """Add ``entry`` as ``name``; ValueError if the name is taken. Returns the entry."""
+        if not isinstance(name, str) or not name:
+            raise ValueError(f"{self.kind} name: expected a non-empty string, got {name!r}")
+        if name in self._entries:
+            raise ValueError(f"{self.kind} {name!r} is already registered")
+        self._entries[name] = entry
+        return entry
+
+    def unregister(self, name: str) -> None:
+        """Remove ``name`` (tests that register a temporary entry)."""
+        self._entries.pop(name, None)
+
+    def get(self, name: str) -> T:
+        """The entry of ``name``; ValueError naming the closest registered names if unknown."""
+        try:
+            return self._entries[name]
+        except (KeyError, TypeError):
+            close = difflib.get_close_matches(str(name), list(self._entries), n=1, cutoff=0.4)
+            hint = f"; did you mean '{close[0]}'?" if close else ""
+            raise ValueError(f"unknown {self.kind} {name!r}{hint} "
+                             f"(known: {', '.join(self._entries)})") from None
+
+    def load(self, name: str) -> Any:
+        """The entry of ``name`` with a ``"module:attribute"`` path imported."""
+        return resolve(self.get(name))
+
+    def names(self) -> tuple[str, ...]:
+        return tuple(self._entries)
+
+    def items(self) -> Iterator[tuple[str, T]]:
+        return iter(tuple(self._entries.items()))
+
+    def __contains__(self, name: object) -> bool:
+        return name in self._entries
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(tuple(self._entries))
+
+    def __len__(self) -> int:
+        return len(self._entries)
+
+
+_loaded: set[str] = set()
+
+
+def _import_plugin(spec: str) -> None:
+    if spec in _loaded:
+        return
+    if spec.endswith(".py"):
+        path = Path(spec).resolve()
+        if not path.is_file():
+            raise ValueError(f"plugin {spec!r}: no such file")
+        name = f"swarmloc_plugin_{path.stem}"
+        module_spec = importlib.util.spec_from_file_location(name, path)
+        module = importlib.util.module_from_spec(module_spec)
+        sys.modules[name] = module
+        module_spec.loader.exec_module(module)
+    else:
+        importlib.import_module(spec)
+    _loaded.add(spec)
+
+
+def load_plugins() -> list[str]:
+    """Import every plugin (entry points, then ``SWARMLOC_PLUGINS``), once per process; returns
+    what was imported. A plugin that fails to import raises, naming it."""
+    specs = [ep.value for ep in entry_points(group=PLUGINS_GROUP)]
+    specs += [s for s in os.environ.get(PLUGINS_ENV, "").split(os.pathsep) if s]
+    for spec in specs:
+        try:
+            _import_plugin(spec)
+        except ValueError:
+            raise
+        except Exception as exc:  # a plugin's own error: say which plugin
+            raise ValueError(f"plugin {spec!r} failed to import: {type(exc).__name__}: {exc}") from exc
+    return specs
+
+
+def add_plugins(specs: list[str]) -> None:
+    """Add ``specs`` (``--plugin`` values) to ``SWARMLOC_PLUGINS`` for this process and its
+    children, files as absolute paths (children may start elsewhere), and import them."""
+    current = [s for s in os.environ.get(PLUGINS_ENV, "").split(os.pathsep) if s]
+    for spec in specs:
+        spec = str(Path(spec).resolve()) if spec.endswith(".py") else spec
+        if spec not in current:
+            current.append(spec)
+    os.environ[PLUGINS_ENV] = os.pathsep.join(current)
+    load_plugins()

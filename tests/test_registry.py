@@ -1,0 +1,49 @@
+"""Registries (swarmloc/registry.py): duplicates refused, unknown names answered with the closest
+one, lazy "module:attribute" entries, plugins from SWARMLOC_PLUGINS and --plugin."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+import pytest
+
+from swarmloc.registry import PLUGINS_ENV, Registry, resolve
+
+
+def test_a_name_registers_once_and_unknown_names_suggest_the_closest():
+    reg: Registry[int] = Registry("widget")
+    reg.register("alpha", 1)
+    reg.register("beta", 2)
+    with pytest.raises(ValueError, match="widget 'alpha' is already registered"):
+        reg.register("alpha", 3)
+    assert reg.get("alpha") == 1 and reg.names() == ("alpha", "beta") and "beta" in reg
+    with pytest.raises(ValueError, match=r"unknown widget 'alpah'; did you mean 'alpha'\?"):
+        reg.get("alpah")
+    with pytest.raises(ValueError, match="non-empty string"):
+        reg.register("", 4)
+
+
+def test_entries_given_as_paths_are_imported_when_loaded():
+    reg: Registry[str] = Registry("thing")
+    reg.register("join", "os.path:join")
+    assert reg.load("join") is os.path.join
+    assert resolve("swarmloc.registry:Registry.register") is Registry.register
+    assert resolve(len) is len
+
+
+def test_a_plugin_file_is_imported_in_the_process_and_its_children(tmp_path):
+    plugin = tmp_path / "my_plugin.py"
+    plugin.write_text("import os\nos.environ['SWARMLOC_TEST_PLUGIN_RAN'] = 'yes'\n")
+    code = ("import os; from swarmloc.registry import add_plugins; add_plugins([%r]);"
+            "print(os.environ['SWARMLOC_TEST_PLUGIN_RAN'], os.environ[%r])" % (str(plugin), PLUGINS_ENV))
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                         cwd=tmp_path, timeout=60).stdout.split()
+    assert out == ["yes", str(plugin)]
+    broken = tmp_path / "broken.py"
+    broken.write_text("raise RuntimeError('boom')\n")
+    done = subprocess.run([sys.executable, "-c", "from swarmloc.registry import load_plugins; load_plugins()"],
+                          capture_output=True, text=True, check=False, timeout=60,
+                          env={**os.environ, PLUGINS_ENV: str(broken)})
+    assert done.returncode != 0 and "broken.py" in done.stderr and "boom" in done.stderr
