@@ -10,7 +10,6 @@ asked for.
 
 from __future__ import annotations
 
-import importlib
 from typing import Any, Protocol
 
 from swarmloc.config import ConfigError
@@ -32,16 +31,6 @@ class AgentBrain(Protocol):
         in ``errors`` and skipped."""
 
 
-#: family name -> "module:callable" building an AgentBrain from the world's Welcome and the
-#: family's scenario object parsed from it.
-FAMILIES: dict[str, str] = {
-    "foraging": "swarmloc.agents.epuck.agent:ForagingAgent.from_welcome",
-    "laser": "swarmloc.agents.laser.agent:LaserAgent.from_welcome",
-    "vision": "swarmloc.agents.vision.agent:VisionAgent.from_welcome",
-    "replay": "swarmloc.agents.replay.agent:ReplayAgent.from_welcome",
-}
-
-
 def brain_from_welcome(welcome: Welcome, *, null_brain: bool = False) -> AgentBrain:
     """The brain the world's scenario asks for; BrainError names what is unusable.
 
@@ -60,8 +49,7 @@ def brain_from_welcome(welcome: Welcome, *, null_brain: bool = False) -> AgentBr
             raise BrainError(f"--null-brain stands in for e-puck brains only, not for the "
                              f"{loaded.family!r} family")
         return StandstillAgent(welcome.robot_id)
-    module, _, path = FAMILIES[loaded.family].partition(":")
-    obj: Any = importlib.import_module(module)
-    for part in path.split("."):
-        obj = getattr(obj, part)
-    return obj(welcome, loaded.scenario)
+    from swarmloc.families import FAMILIES
+    from swarmloc.registry import resolve
+
+    return resolve(FAMILIES.get(loaded.family).brain)(welcome, loaded.scenario)

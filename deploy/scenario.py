@@ -47,12 +47,14 @@ class Scenario:
 def _shipped() -> dict[str, tuple[str, Path]]:
     """Shipped scenario name -> (family, file): e-puck ones at the top of ``scenarios/``, other
     families in a sub-folder named after the family."""
+    from swarmloc.families import FAMILIES
+
     folder = resources.files("swarmloc.deploy") / "scenarios"
     found: dict[str, tuple[str, Path]] = {}
     for entry in folder.iterdir():
         if entry.name.endswith(".toml"):
             found[entry.name[:-5]] = ("foraging", Path(str(entry)))
-        elif entry.is_dir() and entry.name in FAMILY_SCENARIOS:
+        elif entry.is_dir() and entry.name in FAMILIES:
             for sub in entry.iterdir():
                 if sub.name.endswith(".toml"):
                     found[sub.name[:-5]] = (entry.name, Path(str(sub)))
@@ -96,24 +98,6 @@ def load_scenario(name_or_path: str = DEFAULT_SCENARIO, overrides: list[str] = (
     """Load and validate a scenario, with ``section.key=value`` overrides applied."""
     data = apply_overrides(scenario_data(name_or_path), list(overrides))
     return Scenario.from_dict(data)
-
-
-#: family -> "module:Class" of its scenario (``from_dict``/``to_dict``, validated, strict).
-FAMILY_SCENARIOS: dict[str, str] = {
-    "foraging": "swarmloc.deploy.scenario:Scenario",
-    "laser": "swarmloc.deploy.lab.laser.runner:LaserScenario",
-    "vision": "swarmloc.deploy.lab.vision.runner:VisionScenario",
-    "replay": "swarmloc.world.replay.service:ReplayScenario",
-}
-
-#: What the common command-line flags set in each family's scenario.
-FLAG_KEYS: dict[str, dict[str, str]] = {
-    "foraging": {"robots": "world.robots", "strategy": "agent.strategy", "beta": "agent.beta",
-                 "seed": "world.seed", "duration_s": "world.duration_s"},
-    "laser": {"robots": "world.robots", "seed": "world.seed", "algorithm": "algorithm.name"},
-    "vision": {"seed": "world.seed", "duration_s": "setup.duration_s"},
-    "replay": {"seed": "seed", "duration_s": "duration_s", "algorithm": "algorithm"},
-}
 
 
 @dataclass(frozen=True)
@@ -160,20 +144,24 @@ class AnyScenario:
 
 
 def family_of(data: dict) -> str:
+    from swarmloc.families import FAMILIES
+
     family = data.get("family", "foraging")
-    if family not in FAMILY_SCENARIOS:
-        raise ConfigError(f"family: unknown robot family {family!r} (known: {', '.join(FAMILY_SCENARIOS)})")
+    try:
+        FAMILIES.get(family)
+    except ValueError as exc:
+        raise ConfigError(f"family: {exc}") from None
     return family
 
 
 def scenario_from_dict(data: dict) -> AnyScenario:
     """A scenario of any family from its plain dict, as a run folder's ``scenario.json``, a
     world's Welcome or :meth:`AnyScenario.to_dict` carries it; ConfigError names what is wrong."""
-    import importlib
+    from swarmloc.families import FAMILIES
+    from swarmloc.registry import resolve
 
     family = family_of(data)
-    module, _, name = FAMILY_SCENARIOS[family].partition(":")
-    cls = getattr(importlib.import_module(module), name)
+    cls = resolve(FAMILIES.get(family).scenario)
     fields = {k: v for k, v in data.items() if k != "family"}
     if "family" in getattr(cls, "__dataclass_fields__", {}):
         fields["family"] = family
@@ -185,7 +173,9 @@ def load_any(name_or_path: str, flags: dict | None = None, overrides: list[str] 
     family's keys (a flag the family has no use for is an error), then ``overrides`` applied."""
     data = scenario_data(name_or_path)
     family = family_of(data)
-    keys = FLAG_KEYS.get(family, {})
+    from swarmloc.families import FAMILIES
+
+    keys = FAMILIES.get(family).flags
     extra = []
     for flag, value in (flags or {}).items():
         if value is None:

@@ -36,8 +36,8 @@ def test_entries_given_as_paths_are_imported_when_loaded():
 def test_a_plugin_file_is_imported_in_the_process_and_its_children(tmp_path):
     plugin = tmp_path / "my_plugin.py"
     plugin.write_text("import os\nos.environ['SWARMLOC_TEST_PLUGIN_RAN'] = 'yes'\n")
-    code = ("import os; from swarmloc.registry import add_plugins; add_plugins([%r]);"
-            "print(os.environ['SWARMLOC_TEST_PLUGIN_RAN'], os.environ[%r])" % (str(plugin), PLUGINS_ENV))
+    code = (f"import os; from swarmloc.registry import add_plugins; add_plugins([{str(plugin)!r}]);"
+            f"print(os.environ['SWARMLOC_TEST_PLUGIN_RAN'], os.environ[{PLUGINS_ENV!r}])")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
                          cwd=tmp_path, timeout=60).stdout.split()
     assert out == ["yes", str(plugin)]

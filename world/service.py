@@ -12,7 +12,6 @@ through :func:`served_world`; each family's module is imported only when asked f
 
 from __future__ import annotations
 
-import importlib
 from typing import Any, Protocol
 
 import numpy as np
@@ -83,17 +82,9 @@ class DrivenRobots:
         self._alive[robot] = True
 
 
-#: family name -> "module:callable" building a ServedWorld from that family's scenario object.
-#: Imported lazily so that serving e-pucks never imports OpenCV or the laser maps.
-FAMILIES: dict[str, str] = {
-    "foraging": "swarmloc.world.epuck.service:_foraging",
-    "laser": "swarmloc.world.laser.service:LaserService",
-    "vision": "swarmloc.world.vision.service:VisionService",
-    "replay": "swarmloc.world.replay.service:ReplayService",
-}
-
-
 def served_world(scenario) -> ServedWorld:
     """The served world of a loaded scenario of any family (``deploy.scenario.AnyScenario``)."""
-    module, _, name = FAMILIES[scenario.family].partition(":")
-    return getattr(importlib.import_module(module), name)(scenario.scenario)
+    from swarmloc.families import FAMILIES
+    from swarmloc.registry import resolve
+
+    return resolve(FAMILIES.get(scenario.family).world)(scenario.scenario)

@@ -2,7 +2,7 @@
 
 :class:`ForagingAgent` wraps the foraging brain with social odometry (seeds 000/001,
 :mod:`~swarmloc.agents.epuck.foraging`) for one robot; :class:`StandstillAgent` is the transport
-benchmarks' stand-in (``swarmloc agent --null-brain``). :data:`swarmloc.agents.brains.FAMILIES`
+benchmarks' stand-in (``swarmloc agent --null-brain``). :data:`swarmloc.families.FAMILIES`
 names :meth:`ForagingAgent.from_welcome`.
 """
 

@@ -115,15 +115,10 @@ class AgentConfig:
     encounter_memory: int = 4
 
     def __post_init__(self):
-        if self.strategy not in STRATEGIES:
-            import difflib
-
-            close = difflib.get_close_matches(self.strategy, list(STRATEGIES), n=1, cutoff=0.3)
-            hint = f"; did you mean '{close[0]}'?" if close else ""
-            raise ValueError(
-                f"strategy: unknown strategy '{self.strategy}'{hint} "
-                f"(known: {', '.join(STRATEGIES)})"
-            )
+        try:
+            STRATEGIES.get(self.strategy)
+        except ValueError as exc:
+            raise ValueError(f"strategy: {exc}") from None
         for name in (
             "confidence_unit_m",
             "cruise_speed_steps_s",

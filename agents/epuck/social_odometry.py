@@ -34,6 +34,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from swarmloc.registry import Registry
+
 
 @dataclass(frozen=True)
 class Strategy:
@@ -55,10 +57,11 @@ class Strategy:
     central: str | None = None
 
 
-#: The registry of strategies, by the names the papers use.
-STRATEGIES: dict[str, Strategy] = {
-    s.name: s
-    for s in (
+#: The registry of strategies, by the names the papers use. A strategy combines the built-in
+#: gains and confidences that the compiled brain implements (a new fusion rule of its own is a
+#: new brain: docs/extending.md).
+STRATEGIES: Registry[Strategy] = Registry("strategy")
+for _s in (
         Strategy("NC", communicates=False, double=False, gain="none"),
         Strategy("SSGIKF", communicates=True, double=False, gain="kalman"),
         Strategy("DSGIKF", communicates=True, double=True, gain="kalman"),
@@ -68,8 +71,8 @@ STRATEGIES: dict[str, Strategy] = {
         Strategy("DSIKF", communicates=True, double=True, gain="kalman", confidence="covariance"),
         Strategy("GLOBAL", communicates=False, double=False, gain="none", central="system"),
         Strategy("GLOBAL_RB", communicates=False, double=False, gain="none", central="boards"),
-    )
-}
+):
+    STRATEGIES.register(_s.name, _s)
 
 
 def kalman_gain(p_own: np.ndarray, p_other: np.ndarray) -> np.ndarray:

@@ -69,6 +69,7 @@ import msgpack
 import numpy as np
 
 from swarmloc.agents.epuck.social_odometry import sgikf_update
+from swarmloc.registry import Registry
 from swarmloc.world.replay.replay import MAX_PAYLOAD_BYTES, LandmarkObservation, Message
 
 TWO_PI = 2.0 * math.pi
@@ -730,14 +731,14 @@ class Algorithm:
     build: Builder
 
 
-ALGORITHMS: dict[str, Algorithm] = {}
+#: The landmark localizers by name (:class:`swarmloc.registry.Registry`); a plugin adds one with
+#: :func:`register`.
+ALGORITHMS: Registry[Algorithm] = Registry("algorithm")
 
 
 def register(algorithm: Algorithm) -> None:
     """Add an algorithm to :data:`ALGORITHMS`; a second one with the same name is an error."""
-    if algorithm.name in ALGORITHMS:
-        raise ValueError(f"algorithm {algorithm.name!r} is already registered")
-    ALGORITHMS[algorithm.name] = algorithm
+    ALGORITHMS.register(algorithm.name, algorithm)
 
 
 def build_localizer(name: str, setup: LandmarkSetup, rng: np.random.Generator,
@@ -745,12 +746,13 @@ def build_localizer(name: str, setup: LandmarkSetup, rng: np.random.Generator,
     """The localizer of algorithm ``name`` (``dr``, ``ekf``, ``pf``, ``cfsga``) for one robot;
     ``params`` are the algorithm's parameters by name (unknown names are rejected)."""
     if name not in ALGORITHMS:
-        close = difflib.get_close_matches(str(name), list(ALGORITHMS), n=1, cutoff=0.3)
+        close = difflib.get_close_matches(str(name), ALGORITHMS.names(), n=1, cutoff=0.3)
         hint = f"; did you mean {close[0]!r}?" if close else ""
         raise ValueError(f"algorithm: unknown {name!r} (known: {', '.join(ALGORITHMS)}){hint}")
+    algorithm = ALGORITHMS.get(name)
     if not isinstance(rng, np.random.Generator):
         raise TypeError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
-    return ALGORITHMS[name].build(setup, rng, dict(params or {}))
+    return algorithm.build(setup, rng, dict(params or {}))
 
 
 def _build_dr(setup, rng, params):

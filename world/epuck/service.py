@@ -2,7 +2,7 @@
 
 The adapter the world-server shell (:mod:`swarmloc.world.server`) runs for scenarios of the
 ``foraging`` family, around the pure model :class:`~swarmloc.world.epuck.foraging.ForagingWorld`;
-:data:`swarmloc.world.service.FAMILIES` names :func:`_foraging`.
+:data:`swarmloc.families.FAMILIES` names :func:`_foraging`.
 """
 
 from __future__ import annotations

@@ -151,7 +151,7 @@ def _fmt_beta(beta: float | None) -> str:
 def _is_fermi(strategy: str | None) -> bool:
     from swarmloc.agents.epuck.social_odometry import STRATEGIES
 
-    known = STRATEGIES.get(strategy or "")
+    known = STRATEGIES.get(strategy) if strategy in STRATEGIES else None
     return known.gain == "fermi" if known is not None else bool(strategy) and "FF" in strategy
 
 

@@ -55,7 +55,6 @@ import dataclasses
 import difflib
 import functools
 import hashlib
-import importlib
 import json
 import math
 import sys
@@ -71,19 +70,12 @@ import numpy as np
 from swarmloc.agents.epuck.foraging import agent_rng
 from swarmloc.agents.laser.localizer import Localizer, LocalizerSetup
 from swarmloc.config import ConfigError, apply_overrides, from_dict, load_toml, to_dict
+from swarmloc.registry import Registry, resolve
 from swarmloc.world.laser.laser import wrap_angle
 from swarmloc.world.laser.maps import MAPS, SegmentMap
 from swarmloc.world.laser.world import WORLD_STREAM, LaserWorld, LaserWorldConfig
 
 # -- algorithms -------------------------------------------------------------------------------
-
-
-def _resolve(target):
-    """A ``"module:attribute"`` path (imported on first use) or the object itself."""
-    if not isinstance(target, str):
-        return target
-    module, _, attribute = target.partition(":")
-    return getattr(importlib.import_module(module), attribute)
 
 
 @dataclass(frozen=True)
@@ -114,7 +106,7 @@ class AlgorithmEntry:
         if self.params_type is None:
             return
         try:
-            _resolve(self.params_type).from_dict(params)
+            resolve(self.params_type).from_dict(params)
         except (TypeError, ValueError) as exc:
             raise ValueError(f"{self.name}: {exc}") from None
 
@@ -123,38 +115,24 @@ class AlgorithmEntry:
         if self.params_type is None or not self.population_keys:
             values = [params[k] for k in self.population_keys if k in params]
         else:
-            built = _resolve(self.params_type).from_dict(params)
+            built = resolve(self.params_type).from_dict(params)
             values = [getattr(built, k) for k in self.population_keys]
         values = sorted(set(values))
         return "-".join(str(v) for v in values)
 
     def build(self, setup: LocalizerSetup, params: dict, rng: np.random.Generator) -> Localizer:
-        return _resolve(self.localizer).from_config(setup, params, rng)
+        return resolve(self.localizer).from_config(setup, params, rng)
 
 
-class AlgorithmRegistry:
-    """Localizers by name. Registering a name twice is an error; an unknown name suggests the
-    closest registered one."""
+class AlgorithmRegistry(Registry[AlgorithmEntry]):
+    """Localizers by name (:class:`swarmloc.registry.Registry`: a name registers once, an
+    unknown name suggests the closest)."""
 
     def __init__(self) -> None:
-        self._entries: dict[str, AlgorithmEntry] = {}
+        super().__init__("algorithm")
 
-    def register(self, entry: AlgorithmEntry) -> None:
-        if entry.name in self._entries:
-            raise ValueError(f"algorithm {entry.name!r} is already registered")
-        self._entries[entry.name] = entry
-
-    def names(self) -> tuple[str, ...]:
-        return tuple(self._entries)
-
-    def get(self, name: str) -> AlgorithmEntry:
-        try:
-            return self._entries[name]
-        except KeyError:
-            close = difflib.get_close_matches(str(name), self._entries, n=1, cutoff=0.4)
-            hint = f"; did you mean '{close[0]}'?" if close else ""
-            raise ValueError(f"unknown algorithm {name!r}{hint} "
-                             f"(known: {', '.join(self._entries)})") from None
+    def register(self, entry: AlgorithmEntry) -> AlgorithmEntry:  # type: ignore[override]
+        return super().register(entry.name, entry)
 
 
 def default_algorithms() -> AlgorithmRegistry:
@@ -175,7 +153,8 @@ def default_algorithms() -> AlgorithmRegistry:
     return registry
 
 
-#: The built-in algorithms (read-only use; build your own registry to add one).
+#: The localizers scenarios, ``--algorithm`` and specs choose from: the built-in four, and any a
+#: plugin registers (``ALGORITHMS.register(AlgorithmEntry(...))``, docs/extending.md).
 ALGORITHMS = default_algorithms()
 
 

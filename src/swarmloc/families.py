@@ -1,0 +1,61 @@
+"""The robot families, in one registry: what each family plugs into the shells.
+
+A robot family (e-puck foraging, map-based laser, vision, a replay of recorded data) is a
+scenario type, a world served to agent processes, and the brain an agent process runs; the
+shells (``world/server.py``, ``agents/node.py``, ``deploy/run.py``) know none of them and look
+them up here by the scenario's ``family`` key. Entries are ``"module:attribute"`` paths, imported
+on first use, so that serving e-pucks never imports OpenCV or the laser maps.
+
+A new family registers a :class:`Family` (``FAMILIES.register("my-family", Family(...))``) from a
+plugin (:mod:`swarmloc.registry`); ``docs/extending.md`` says what each piece must do, and
+:mod:`swarmloc.checker` checks it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from swarmloc.registry import Registry
+
+
+@dataclass(frozen=True)
+class Family:
+    """One robot family's pieces, as ``"module:attribute"`` paths (or the objects themselves).
+
+    - ``scenario``: the scenario class (``from_dict``/``to_dict``, strict: an unknown key is an
+      error naming it);
+    - ``world``: ``scenario -> ServedWorld`` (:class:`swarmloc.world.service.ServedWorld`);
+    - ``brain``: ``(welcome, scenario) -> AgentBrain`` (:class:`swarmloc.agents.brains.AgentBrain`);
+    - ``flags``: what the common command-line flags (``--robots``, ``--seed``, ...) set in the
+      family's scenario.
+    """
+
+    scenario: object
+    world: object
+    brain: object
+    flags: dict = field(default_factory=dict)
+
+
+FAMILIES: Registry[Family] = Registry("robot family")
+
+FAMILIES.register("foraging", Family(
+    scenario="swarmloc.deploy.scenario:Scenario",
+    world="swarmloc.world.epuck.service:_foraging",
+    brain="swarmloc.agents.epuck.agent:ForagingAgent.from_welcome",
+    flags={"robots": "world.robots", "strategy": "agent.strategy", "beta": "agent.beta",
+           "seed": "world.seed", "duration_s": "world.duration_s"}))
+FAMILIES.register("laser", Family(
+    scenario="swarmloc.deploy.lab.laser.runner:LaserScenario",
+    world="swarmloc.world.laser.service:LaserService",
+    brain="swarmloc.agents.laser.agent:LaserAgent.from_welcome",
+    flags={"robots": "world.robots", "seed": "world.seed", "algorithm": "algorithm.name"}))
+FAMILIES.register("vision", Family(
+    scenario="swarmloc.deploy.lab.vision.runner:VisionScenario",
+    world="swarmloc.world.vision.service:VisionService",
+    brain="swarmloc.agents.vision.agent:VisionAgent.from_welcome",
+    flags={"seed": "world.seed", "duration_s": "setup.duration_s"}))
+FAMILIES.register("replay", Family(
+    scenario="swarmloc.world.replay.service:ReplayScenario",
+    world="swarmloc.world.replay.service:ReplayService",
+    brain="swarmloc.agents.replay.agent:ReplayAgent.from_welcome",
+    flags={"seed": "seed", "duration_s": "duration_s", "algorithm": "algorithm"}))
