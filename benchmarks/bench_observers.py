@@ -29,7 +29,7 @@ def _watch(url: str, seen: dict) -> None:
     async def go():
         async with aiohttp.ClientSession() as http, http.ws_connect(url.replace("http", "ws") + "ws") as ws:
             async for msg in ws:
-                if msg.type == aiohttp.WSMsgType.TEXT and '"type": "frame"' in msg.data[:40]:
+                if msg.type == aiohttp.WSMsgType.TEXT and '"type":"frame"' in msg.data[:40]:
                     seen["frames"] = seen.get("frames", 0) + 1
 
     try:

@@ -213,11 +213,11 @@ def _synthetic_replay(tmp_path):
 
 
 FAMILIES = {
-    # name: (scenario builder, lockstep?) -- e-pucks and replays tick too fast in lockstep for a
-    # page to watch, so they run in real time; laser and vision robots are slow enough.
+    # name: (scenario builder, lockstep?) -- in lockstep these short runs end before a page has
+    # loaded, so they run in real time (the recording test covers lockstep).
     "foraging": (lambda tmp: load_any("ES1", {"robots": 4, "duration_s": 25.0, "seed": 3}, []), False),
-    "laser": (lambda tmp: load_any("laser-kidnap-office", {"seed": 1}, ["world.steps=60"]), True),
-    "vision": (lambda tmp: load_any("vision-exp2", {"seed": 2}, []), True),
+    "laser": (lambda tmp: load_any("laser-collab-three-rooms", {"seed": 1}, ["world.steps=40"]), False),
+    "vision": (lambda tmp: load_any("vision-exp2", {"seed": 2}, []), False),
     "replay": (_synthetic_replay, False),
 }
 
