@@ -171,11 +171,17 @@ def main_world(args) -> int:
         os.replace(tmp, out / "results.json")
 
     with open_session(config_from_args(args)) as session:
-        server = WorldServer(session, keys, served_world(scenario), scenario.to_dict(),
+        from swarmloc.deploy.observe.tap import WorldTap
+
+        served = served_world(scenario)
+        tap = WorldTap(served, session=session, keys=keys, record=args.record,
+                       record_messages=args.record_messages, max_hz=args.frame_hz,
+                       labels={"run": args.run, "scenario": scenario.name})
+        server = WorldServer(session, keys, served, scenario.to_dict(),
                              realtime=args.realtime, act_timeout_s=args.act_timeout_s,
                              join_timeout_s=args.join_timeout_s,
                              checkpoint=write_results if out else None,
-                             checkpoint_every_s=args.checkpoint_s)
+                             checkpoint_every_s=args.checkpoint_s, tap=tap)
         server.declare()
         if args.announce:
             print(json.dumps({"endpoints": bound_endpoints(session)}), flush=True)
@@ -191,6 +197,7 @@ def main_world(args) -> int:
                 code = 0 if result["reason"] == "completed" else 4
         finally:
             server.close()
+            tap.close()
     if out:
         write_results(result)
     else:
@@ -221,7 +228,12 @@ def main_batch(args) -> int:
     scenario = load_from_args(args)
     _compile_kernels()
     t0 = time.perf_counter()
-    result = run_batch(scenario)
+    if args.record:
+        from swarmloc.deploy.observe.batch_record import run_batch_recorded
+
+        result = run_batch_recorded(scenario, args.record)
+    else:
+        result = run_batch(scenario)
     summary = {"scenario": scenario.name, "strategy": scenario.agent.strategy,
                "seed": scenario.world.seed, "robots": scenario.world.robots,
                "wall_s": round(time.perf_counter() - t0, 2), "metrics": result.metrics}
@@ -240,7 +252,9 @@ def main_run(args) -> int:
         raise ConfigError(f"--null-brains stands in for e-puck brains only; scenario "
                           f"'{scenario.name}' is a {scenario.family} scenario")
     return run_local(scenario, run_name=args.run, out_root=Path(args.out), realtime=args.realtime,
-                     quiet=args.quiet, join_timeout_s=args.join_timeout_s, null_brains=args.null_brains)
+                     quiet=args.quiet, join_timeout_s=args.join_timeout_s, null_brains=args.null_brains,
+                     view=args.view, view_http=args.view_http, record=args.record,
+                     record_messages=args.record_messages)
 
 
 def main_laser_experiment(args) -> int:
@@ -268,6 +282,7 @@ def build_parser() -> argparse.ArgumentParser:
     from swarmloc.deploy import warm
     from swarmloc.deploy.lab import experiment
     from swarmloc.deploy.lab.epuck import report
+    from swarmloc.deploy.observe import cli as observe_cli
 
     parser = argparse.ArgumentParser(prog="swarmloc", description=__doc__.splitlines()[0])
     parser.add_argument("-v", "--verbose", action="store_true", help="log more")
@@ -283,6 +298,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--null-brains", action="store_true",
                    help="transport benchmark: e-puck agents answer each Sense with a standstill Act "
                         "instead of running their brains")
+    observe_cli.add_run_arguments(p)
     p.set_defaults(func=main_run)
 
     p = sub.add_parser("world", help="run the world-server")
@@ -297,6 +313,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--checkpoint-s", type=float, default=5.0,
                    help="write the results so far to --out this often (wall seconds)")
     p.add_argument("--join-timeout-s", type=float, default=180.0)
+    observe_cli.add_world_arguments(p)
     p.set_defaults(func=main_world)
 
     p = sub.add_parser("agent", help="run one robot's agent")
@@ -324,10 +341,13 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("batch", help="run a scenario in one process, no Zenoh")
     _scenario_args(p)
     p.add_argument("--json", action="store_true")
+    p.add_argument("--record", default=None, metavar="FILE.mcap",
+                   help="write every tick's world state and the brains' estimates to FILE.mcap")
     p.set_defaults(func=main_batch)
 
     experiment.add_parser(sub)
     report.add_parser(sub)
+    observe_cli.add_parsers(sub)
     warm.add_parser(sub)
     from swarmloc.protocol import tls
 

@@ -86,6 +86,7 @@ class WorldServer:
         state_every_ticks: int = 10,
         checkpoint: Callable[[dict], None] | None = None,
         checkpoint_every_s: float = 5.0,
+        tap=None,
     ):
         self.session = session
         self.keys = keys
@@ -99,6 +100,9 @@ class WorldServer:
         # world-server that dies leaves what it had recorded.
         self.checkpoint = checkpoint
         self.checkpoint_every_s = checkpoint_every_s
+        # An observer tap (deploy/observe/tap.py: WorldTap): gets every tick's Senses and Acts
+        # to record them, and streams frames at a bounded wall-clock rate.
+        self.tap = tap
         n = world.n_robots
         self.errors = ErrorCounter()
         self.stats = TickStats()
@@ -268,8 +272,11 @@ class WorldServer:
                 self._got[:] = False
                 self._acts = [None] * n
                 self._awaited = int((world.alive & self._live).sum())
-            for robot, sense in world.senses():
+            senses = world.senses()
+            for robot, sense in senses:
                 self._sense_pub[robot].put(sense)
+            if self.tap is not None:
+                self.tap.sensed(senses)
             started = time.monotonic()
             self._collect(started)
             with self._cond:
@@ -278,6 +285,8 @@ class WorldServer:
                 acts = self._acts  # None where no act came: the world keeps that robot's command
                 self._acts = [None] * n
             world.step(acts)
+            if self.tap is not None:
+                self.tap.stepped(acts)
             self.stats.ticks += 1
             self.stats.tick_durations_s.append(time.perf_counter() - t0)
             if world.tick % self.state_every_ticks == 0 or world.done:

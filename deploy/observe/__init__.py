@@ -1,6 +1,8 @@
-"""Observers: pieces that watch a run over Zenoh without taking part in it.
+"""Observers of a run: the live browser view, the MCAP recorder and the replayer (issue 17).
 
-:mod:`~swarmloc.deploy.observe.status` (``swarmloc status``) follows a run's world state, robot
-liveliness and error reports for any robot family (seeds 000-004 alike); a browser view and an
-MCAP recorder are meant to land here beside it.
+Everything here reads what the world already has (its state, the Acts that carry the agents'
+estimates) and never slows the lockstep: the world streams frames at a bounded wall-clock rate
+(:mod:`.tap`), a recording of a lockstep run is written by the world itself, every tick
+(:mod:`.record`), and a browser that lags only drops frames (:mod:`.view`).
+:mod:`.status` (``swarmloc status``) lists the live worlds and agents from liveliness.
 """
