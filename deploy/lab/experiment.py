@@ -384,6 +384,9 @@ def plan(spec: ExperimentSpec) -> list[Job]:
 
 def run_job(job: Job) -> dict:
     """Run one replication with the batch engine; a flat dict of what the row needs."""
+    from swarmloc.registry import load_plugins
+
+    load_plugins()  # a worker process (local pool or Dask) imports the spec's plugins too
     module = _family(job.family)
     if module is not None:
         return module.run_job(job)

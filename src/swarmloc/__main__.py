@@ -1,5 +1,5 @@
 """``python -m swarmloc`` is the ``swarmloc`` command."""
 
-from swarmloc.deploy.cli import main
+from swarmloc.deploy.cli import console_main
 
-raise SystemExit(main())
+console_main()
