@@ -27,13 +27,16 @@ class Family:
     - ``world``: ``scenario -> ServedWorld`` (:class:`swarmloc.world.service.ServedWorld`);
     - ``brain``: ``(welcome, scenario) -> AgentBrain`` (:class:`swarmloc.agents.brains.AgentBrain`);
     - ``flags``: what the common command-line flags (``--robots``, ``--seed``, ...) set in the
-      family's scenario.
+      family's scenario;
+    - ``seeded_world``: the run seed reaches the world's Senses (False for a replay of recorded
+      data, where only the brains' generators take it).
     """
 
     scenario: object
     world: object
     brain: object
     flags: dict = field(default_factory=dict)
+    seeded_world: bool = True
 
 
 FAMILIES: Registry[Family] = Registry("robot family")
@@ -58,4 +61,5 @@ FAMILIES.register("replay", Family(
     scenario="swarmloc.world.replay.service:ReplayScenario",
     world="swarmloc.world.replay.service:ReplayService",
     brain="swarmloc.agents.replay.agent:ReplayAgent.from_welcome",
-    flags={"seed": "seed", "duration_s": "duration_s", "algorithm": "algorithm"}))
+    flags={"seed": "seed", "duration_s": "duration_s", "algorithm": "algorithm"},
+    seeded_world=False))
