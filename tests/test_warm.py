@@ -58,7 +58,7 @@ def _cache_files(cache: Path) -> dict[str, tuple[int, int]]:
 
 def test_the_stamp_names_every_kernel_source_and_a_changed_source_makes_it_stale(tmp_path, monkeypatch):
     names = {p.name for p in kernel_sources()}
-    assert {"kernels.py", "agent_tick.py", "epuck_wire.py", "social_codec.py", "batch.py"} <= names
+    assert {"kernels.py", "agent_tick.py", "wire.py", "social_codec.py", "batch.py"} <= names
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
     assert not is_warm(tmp_path)
     (tmp_path / STAMP_NAME).write_text(fingerprint())
