@@ -83,7 +83,7 @@ BAD_SPECS = {
     ),
     "impossible value": (
         'name = "bad"\n' + GOOD_GROUP + '[group.set]\n"world.robots" = -1\n',
-        r"group 'g', setting 'g/ES1'.*robots: must be in 1\.\.65536, got -1",
+        r"group 'g', setting 'g/ES1'.*robots: must be in 1\.\.1048576, got -1",
     ),
     "empty grid list": (
         'name = "bad"\n' + GOOD_GROUP + '[group.grid]\n"agent.strategy" = []\n',

@@ -23,10 +23,10 @@ SO_NAMES = ["SO-3.0x3.0", "SO-3.5x3.5", "SO-4.0x4.0", "SO-4.5x4.5"]
 
 
 def test_shipped_scenario_names():
-    assert builtin_names() == sorted(["ES1", "ES2", "ES3"] + SO_NAMES)
+    assert builtin_names() == sorted(["ES1", "ES2", "ES3", "ES3-tiled"] + SO_NAMES)
 
 
-@pytest.mark.parametrize("name", ["ES1", "ES2", "ES3"] + SO_NAMES)
+@pytest.mark.parametrize("name", ["ES1", "ES2", "ES3", "ES3-tiled"] + SO_NAMES)
 def test_every_shipped_scenario_loads(name):
     s = load_scenario(name)
     assert isinstance(s, Scenario)

@@ -20,8 +20,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import cKDTree
-
 from swarmloc.world.epuck import kernels
 
 #: Ground reflectance of the three floor colours (dimensionless, white = 1).
@@ -74,6 +72,10 @@ class Arena:
     height_m: float
     nest: Disc
     prey: Disc
+    #: A tiled floor (scaled scenario families): the floor of ``[0, tile_m[0]] x [0, tile_m[1]]``,
+    #: with the nest and the prey, repeats every ``tile_m`` over the whole arena; the walls are
+    #: only the outer ones. None: one nest and one prey.
+    tile_m: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
         _finite_positive(self.width_m, "width_m")
@@ -99,13 +101,25 @@ class Arena:
                 f"prey disc overlaps nest disc (centre distance {gap_m} m < sum of radii "
                 f"{self.nest.radius_m + self.prey.radius_m} m)"
             )
-        discs = np.array([*self.nest.centre_m, self.nest.radius_m, *self.prey.centre_m, self.prey.radius_m])
+        tile = ()
+        if self.tile_m is not None:
+            tile_w, tile_h = (float(v) for v in self.tile_m)
+            _finite_positive(tile_w, "tile_m[0]")
+            _finite_positive(tile_h, "tile_m[1]")
+            for name in ("nest", "prey"):
+                (x_m, y_m), r_m = getattr(self, name).centre_m, getattr(self, name).radius_m
+                if x_m + r_m > tile_w or y_m + r_m > tile_h:
+                    raise ValueError(f"{name} disc is not inside the {tile_w} x {tile_h} m tile")
+            tile = (tile_w, tile_h)
+        # 8 numbers for a tiled floor: the kernels then find areas in tile coordinates
+        discs = np.array([*self.nest.centre_m, self.nest.radius_m, *self.prey.centre_m, self.prey.radius_m, *tile])
         discs.flags.writeable = False
         object.__setattr__(self, "_discs", discs)
 
 
 def arena_discs(arena: Arena) -> np.ndarray:
-    """``(nest x, y, radius, prey x, y, radius)`` in metres: the arena as the kernels take it."""
+    """``(nest x, y, radius, prey x, y, radius)`` in metres, then ``(tile width, height)`` for a
+    tiled floor: the arena as the kernels take it."""
     return arena._discs
 
 
@@ -121,6 +135,9 @@ def area_at(points_m: np.ndarray, arena: Arena) -> np.ndarray:
     A point on a disc's rim counts as inside it.
     """
     points_m = np.asarray(points_m, dtype=float)
+    if arena.tile_m is not None:  # the same reduction to tile coordinates as the kernels'
+        tile = np.asarray(arena.tile_m, dtype=float)
+        points_m = points_m - tile * np.floor(points_m / tile)
     out = np.full(points_m.shape[:-1], AREA_NONE, dtype=np.int8)
     out[_inside(points_m, arena.prey)] = AREA_PREY
     out[_inside(points_m, arena.nest)] = AREA_NEST
@@ -210,6 +227,8 @@ def _resolve_collisions_kdtree(
     hi = np.array([arena.width_m - radius_m, arena.height_m - radius_m])
     mov_f = movable.astype(float)
     all_movable = bool(movable.all())
+    from scipy.spatial import cKDTree  # here: scipy costs every agent process 0.4 s and memory
+
     for _ in range(iterations):
         if n >= 2:
             tree = cKDTree(pos, balanced_tree=False, compact_nodes=False)

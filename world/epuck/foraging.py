@@ -68,9 +68,17 @@ class ArenaConfig:
     prey_radius_m: float = 0.1
     #: Robots start at random in a disc at the centre of the arena (seed 000 §5).
     initial_radius_m: float = 0.2
+    #: 0: the arena above, whatever the number of robots. N > 0: a tiled arena that keeps a
+    #: density of N robots per arena of the size above for any number of robots (the ``ES3-tiled``
+    #: family): the arena above (its nest, prey and start disc) is one tile, repeated as many
+    #: times as the robots need (:func:`tile_grid`) inside one set of outer walls; robot ``i``
+    #: starts in the start disc of tile ``i * tiles // robots``.
+    tile_robots: int = 0
 
     def __post_init__(self):
         arena = self.arena()  # validates sizes and discs
+        if isinstance(self.tile_robots, bool) or not isinstance(self.tile_robots, int) or self.tile_robots < 0:
+            raise ValueError(f"tile_robots: must be an integer >= 0, got {self.tile_robots!r}")
         centre = np.array([self.width_m / 2, self.height_m / 2])
         if not self.initial_radius_m > 0:
             raise ValueError(f"initial_radius_m: must be > 0, got {self.initial_radius_m}")
@@ -82,6 +90,7 @@ class ArenaConfig:
                 raise ValueError(f"{name}_centre_m: the {name} overlaps the start disc")
 
     def arena(self) -> Arena:
+        """One tile's arena (the whole arena unless ``tile_robots``: see WorldConfig.arena_model)."""
         return Arena(
             width_m=self.width_m,
             height_m=self.height_m,
@@ -115,8 +124,8 @@ class WorldConfig:
     medium: RabMedium = field(default_factory=RabMedium)
 
     def __post_init__(self):
-        if not 1 <= self.robots <= 65536:
-            raise ValueError(f"robots: must be in 1..65536, got {self.robots}")
+        if not 1 <= self.robots <= MAX_ROBOTS:
+            raise ValueError(f"robots: must be in 1..{MAX_ROBOTS}, got {self.robots}")
         if not self.tick_s > 0:
             raise ValueError(f"tick_s: must be > 0, got {self.tick_s}")
         if not self.duration_s >= self.tick_s:
@@ -127,13 +136,53 @@ class WorldConfig:
             raise ValueError(f"medium.max_received_per_tick: a Sense carries at most {MAX_RECEIVED} messages")
         if self.medium.max_payload_bytes > MAX_RAB_PAYLOAD_BYTES:
             raise ValueError(f"medium.max_payload_bytes: the protocol carries at most {MAX_RAB_PAYLOAD_BYTES} bytes")
-        free = self.arena.width_m * self.arena.height_m
+        cols, rows = self.tiles
+        free = self.arena.width_m * self.arena.height_m * cols * rows
         if self.robots * np.pi * self.body.body_radius_m**2 > 0.5 * free:
             raise ValueError(f"robots: {self.robots} e-pucks do not fit in the arena")
 
     @property
     def n_ticks(self) -> int:
         return round(self.duration_s / self.tick_s)
+
+    @property
+    def tiles(self) -> tuple[int, int]:
+        """Columns and rows of tiles of the arena (1, 1 unless ``arena.tile_robots``)."""
+        if not self.arena.tile_robots:
+            return 1, 1
+        return tile_grid(-(-self.robots // self.arena.tile_robots), self.arena.width_m, self.arena.height_m)
+
+    def arena_model(self) -> Arena:
+        """The walled arena the robots move in: ``arena.arena()``, or its tiling."""
+        one = self.arena.arena()
+        cols, rows = self.tiles
+        if cols * rows == 1:
+            return one
+        return replace(one, width_m=cols * one.width_m, height_m=rows * one.height_m,
+                       tile_m=(one.width_m, one.height_m))
+
+
+#: The most robots a world holds. The batch engine takes that many; a swarm of processes at most
+#: 65,536 (robot ids cross the wire as 0..65535, protocol/messages.py), fewer if the machine's
+#: memory cannot hold them (deploy/run.py: check_memory).
+MAX_ROBOTS = 1 << 20
+
+
+def tile_grid(tiles: int, tile_w_m: float, tile_h_m: float) -> tuple[int, int]:
+    """``(columns, rows)`` for at least ``tiles`` tiles of ``tile_w_m`` x ``tile_h_m``: the fewest
+    tiles left empty (none when ``tiles`` factors so), with the arena's sides at most 3:1, and
+    of those the squarest arena (1000 ES3 tiles: 40 x 25, 240 x 212.5 m); robots are spread evenly
+    over all tiles, so the density is ``robots / (columns * rows * tile area)``."""
+    best = None
+    for cols in range(1, tiles + 1):
+        rows = -(-tiles // cols)
+        aspect = max(cols * tile_w_m, rows * tile_h_m) / min(cols * tile_w_m, rows * tile_h_m)
+        key = (aspect > 3.0, cols * rows - tiles, aspect)
+        if best is None or key < best[0]:
+            best = (key, cols, rows)
+        if rows == 1:
+            break
+    return best[1], best[2]
 
 
 @dataclass
@@ -148,31 +197,49 @@ class Observation:
 
 
 def initial_poses(config: WorldConfig, rng: np.random.Generator) -> np.ndarray:
-    """Random non-overlapping poses in the start disc, random headings (seed 000 §5, §6.2)."""
-    n, radius = config.robots, config.body.body_radius_m
-    centre = np.array([config.arena.width_m / 2, config.arena.height_m / 2])
+    """Random non-overlapping poses in the start disc, random headings (seed 000 §5, §6.2). In a
+    tiled arena, the robots of each tile in order (robot ``i`` in tile ``i * tiles // robots``,
+    so that neighbours are near in memory too) in that tile's start disc, then all headings."""
+    n = config.robots
+    cols, rows = config.tiles
+    if cols * rows == 1:
+        centre = np.array([config.arena.width_m / 2, config.arena.height_m / 2])
+        pose = np.zeros((n, 3))
+        _place_in_disc(pose, centre, config, rng, config.arena_model())
+    else:
+        pose = np.zeros((n, 3))
+        tiles = cols * rows
+        bounds = np.arange(tiles + 1) * n // tiles
+        arena = config.arena_model()
+        for t in range(tiles):  # row by row
+            centre = np.array([(t % cols + 0.5) * config.arena.width_m, (t // cols + 0.5) * config.arena.height_m])
+            _place_in_disc(pose[bounds[t]:bounds[t + 1]], centre, config, rng, arena)
+    pose[:, 2] = rng.uniform(-np.pi, np.pi, n)
+    return pose
+
+
+def _place_in_disc(pose: np.ndarray, centre: np.ndarray, config: WorldConfig, rng: np.random.Generator,
+                   arena: Arena) -> None:
+    """Positions ``pose[:, :2]`` at random in the start disc around ``centre``, without overlap:
+    batches of candidates drawn at once, each kept if it overlaps no body kept before
+    (world/epuck/kernels.py: place_candidates)."""
+    n, radius = pose.shape[0], config.body.body_radius_m
+    if n == 0:
+        return
     spread = config.arena.initial_radius_m
-    pose = np.zeros((n, 3))
     placed = 0
     for _ in range(200):
         # Draw a whole batch of candidates at once; keep those that do not overlap.
         r = spread * np.sqrt(rng.random(n))
         a = rng.uniform(-np.pi, np.pi, n)
         cand = centre + np.stack((r * np.cos(a), r * np.sin(a)), axis=1)
-        for c in cand:
-            if placed == n:
-                break
-            if placed == 0 or np.min(np.hypot(*(pose[:placed, :2] - c).T)) >= 2 * radius:
-                pose[placed, :2] = c
-                placed += 1
+        placed = kernels.place_candidates(pose, placed, cand, 2 * radius)
         if placed == n:
             break
     if placed < n:  # too dense to place without overlap: let collisions spread the rest
         extra = centre + rng.uniform(-spread, spread, (n - placed, 2))
         pose[placed:, :2] = extra
-        pose[:, :2] = resolve_collisions(pose[:, :2], radius, config.arena.arena(), iterations=20)
-    pose[:, 2] = rng.uniform(-np.pi, np.pi, n)
-    return pose
+        pose[:, :2] = resolve_collisions(pose[:, :2], radius, arena, iterations=20)
 
 
 _kernels_loaded = False
@@ -188,7 +255,8 @@ def _load_kernels(config: WorldConfig) -> None:
         return
     _kernels_loaded = True
     robots = 2 if 2 * np.pi * config.body.body_radius_m**2 <= 0.5 * config.arena.width_m * config.arena.height_m else 1
-    world = ForagingWorld(replace(config, robots=robots), np.random.default_rng(0))
+    world = ForagingWorld(replace(config, robots=robots, arena=replace(config.arena, tile_robots=0)),
+                          np.random.default_rng(0))
     world.observe()
     world.step(np.zeros((robots, 2)), np.ones(robots, bool), np.zeros(robots, bool))
 
@@ -199,7 +267,7 @@ class ForagingWorld:
     def __init__(self, config: WorldConfig, rng: np.random.Generator | None = None):
         self.config = config
         self.rng = rng if rng is not None else np.random.default_rng([config.seed, WORLD_STREAM])
-        self.arena = config.arena.arena()
+        self.arena = config.arena_model()
         n = self._n = config.robots
         self.pose = initial_poses(config, self.rng)
         self.alive = np.ones(n, bool)

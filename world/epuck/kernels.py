@@ -93,10 +93,13 @@ def _clip(value, lo, hi):
 @njit(cache=True, error_model="numpy")
 def build_grid(x_m, y_m, cell_m, x0_m, y0_m, width_m, height_m):
     """Spatial hash of points on square cells over ``[x0, x0 + width] x [y0, y0 + height]``
-    (points outside go to the border cells): ``(cx, cy, start, items, mask)``. The points of
-    cell ``(gx, gy)`` are among ``items[start[b]:start[b + 1]]`` with ``b = cell_bucket(gx, gy,
-    mask)``, together with those of other cells that share the bucket (check ``cx``, ``cy``).
-    O(N) however sparse or large the arena: about two buckets per point.
+    (points outside go to the border cells): ``(cx, cy, start, items, mask, ncx, ncy,
+    item_cell)``. The points of cell ``(gx, gy)`` (``0 <= gx < ncx``, ``0 <= gy < ncy``) are among
+    ``items[start[b]:start[b + 1]]`` with ``b = cell_bucket(gx, gy, ncx, mask)``, together with
+    those of other cells that share the bucket: check ``item_cell[q] == gy * ncx + gx``, which
+    lies next to ``items[q]`` in memory (reading ``cx[items[q]]`` instead cost a cache miss per
+    foreign point at 100,000 robots). O(N) however sparse or large the arena: about two buckets
+    per point.
     """
     n = x_m.shape[0]
     cell_m = cell_m * (1.0 + 1e-9)  # a pair at exactly the query radius stays in adjacent cells
@@ -115,22 +118,35 @@ def build_grid(x_m, y_m, cell_m, x0_m, y0_m, width_m, height_m):
         gy = (y_m[i] - y0_m) / cell_m
         cx[i] = 0 if not gx > 0.0 else (int(gx) if gx < ncx - 1 else ncx - 1)
         cy[i] = 0 if not gy > 0.0 else (int(gy) if gy < ncy - 1 else ncy - 1)
-        b = cell_bucket(cx[i], cy[i], mask)
+        b = cell_bucket(cx[i], cy[i], ncx, mask)
         bucket[i] = b
         start[b + 1] += 1
     for b in range(n_buckets):
         start[b + 1] += start[b]
     fill = start[:-1].copy()
     items = np.empty(n, np.int64)
+    item_cell = np.empty(n, np.int64)
     for i in range(n):
-        items[fill[bucket[i]]] = i
-        fill[bucket[i]] += 1
-    return cx, cy, start, items, mask
+        q = fill[bucket[i]]
+        items[q] = i
+        item_cell[q] = cy[i] * ncx + cx[i]
+        fill[bucket[i]] = q + 1
+    return cx, cy, start, items, mask, ncx, ncy, item_cell
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def cell_bucket(gx, gy, mask):
-    """Hash bucket of cell ``(gx, gy)``: the 9 cells around a point are looked up by hash."""
+def cell_bucket(gx, gy, ncx, mask):
+    """Bucket of cell ``(gx, gy)`` of a grid ``ncx`` cells wide: its row-major index modulo the
+    number of buckets. Not a scrambling hash, on purpose: the cells around a point, and those
+    of robots near in memory (a tiled arena places them so), then sit in nearby buckets, which
+    at 100,000 robots keeps the lookups in the caches (a hash scattered them over megabytes).
+    Which cells share a bucket changes no result: lookups check the cell of every point."""
+    return (gy * ncx + gx) & mask
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _cell_hash(gx, gy, mask):
+    """A scrambling hash of cell ``(gx, gy)`` (cells of an unbounded grid)."""
     return ((gx * 73856093) ^ (gy * 19349663)) & mask
 
 
@@ -164,7 +180,8 @@ def neighbour_pairs_into(x_m, y_m, cutoff_m, x0_m, y0_m, width_m, height_m, pair
     m = 0
     if n >= 2:
         near2 = cutoff_m * cutoff_m * (1.0 + 1e-9)
-        cx, cy, start, items, mask = build_grid(x_m, y_m, cutoff_m, x0_m, y0_m, width_m, height_m)
+        cx, cy, start, items, mask, ncx, ncy, item_cell = build_grid(x_m, y_m, cutoff_m, x0_m, y0_m, width_m,
+                                                                     height_m)
         for i in range(n):
             # Half the 3 x 3 cells around the point: its own (partners j > i), then (+1, 0),
             # (-1, +1), (0, +1), (+1, +1); the point's other neighbours find it from theirs.
@@ -172,11 +189,16 @@ def neighbour_pairs_into(x_m, y_m, cutoff_m, x0_m, y0_m, width_m, height_m, pair
             for cell in range(5):
                 gx = gxi + (0 if cell == 0 else (1 if cell == 1 else cell - 3))
                 gy = gyi + (0 if cell <= 1 else 1)
-                bk = cell_bucket(gx, gy, mask)
+                if gx >= ncx or gy >= ncy or gx < 0:
+                    continue  # no point outside the grid
+                key = gy * ncx + gx
+                bk = cell_bucket(gx, gy, ncx, mask)
                 for q in range(start[bk], start[bk + 1]):
+                    if item_cell[q] != key:
+                        continue  # another cell sharing the bucket
                     j = items[q]
-                    if cx[j] != gx or cy[j] != gy or (cell == 0 and j <= i):
-                        continue  # skip other cells sharing the bucket; each pair once
+                    if cell == 0 and j <= i:
+                        continue  # each pair once
                     a, b = (i, j) if i < j else (j, i)
                     dx = x_m[b] - x_m[a]
                     dy = y_m[b] - y_m[a]
@@ -306,6 +328,16 @@ def _ir_readings(pose, cos_h, sin_h, r_m, range_m, width_m, height_m, cos_a, sin
 
 
 @njit(cache=True, inline="always", error_model="numpy")
+def _area_code_in(px, py, discs):
+    """:func:`_area_code` of a point in an arena's ``discs`` (``world.epuck.arena.arena_discs``):
+    on a tiled floor (8 numbers, the last two the tile's size) in the tile's own coordinates."""
+    if discs.shape[0] >= 8:
+        px = px - discs[6] * math.floor(px / discs[6])
+        py = py - discs[7] * math.floor(py / discs[7])
+    return _area_code(px, py, discs[0], discs[1], discs[2], discs[3], discs[4], discs[5])
+
+
+@njit(cache=True, inline="always", error_model="numpy")
 def _area_code(px, py, nest_x, nest_y, nest_r, prey_x, prey_y, prey_r):
     """AREA_NEST (1), AREA_PREY (2) or AREA_NONE (0) of a point, as ``world.epuck.arena.area_at``."""
     dx = px - nest_x
@@ -339,7 +371,7 @@ def _ground_readings(pose, cos_h, sin_h, offsets, discs, reflectance, noise_u, n
         for g in range(n_g):
             px = pose[i, 0] + c * offsets[g, 0] - s * offsets[g, 1]
             py = pose[i, 1] + s * offsets[g, 0] + c * offsets[g, 1]
-            code = _area_code(px, py, discs[0], discs[1], discs[2], discs[3], discs[4], discs[5])
+            code = _area_code_in(px, py, discs)
             out[i, g] = reflectance[code] * (1.0 + uniform(noise_lo, noise_span, noise_u[i, g]))
 
 
@@ -349,7 +381,7 @@ def area_codes(points, discs):
     n = points.shape[0]
     out = np.empty(n, np.int8)
     for i in range(n):
-        out[i] = _area_code(points[i, 0], points[i, 1], discs[0], discs[1], discs[2], discs[3], discs[4], discs[5])
+        out[i] = _area_code_in(points[i, 0], points[i, 1], discs)
     return out
 
 
@@ -580,14 +612,18 @@ def separate_bodies_near(pos, radius_m, width_m, height_m, iterations, ref_pos, 
                 for p in range(pair_i.shape[0]):
                     any_pair |= _push_pair(pos, pair_i[p], pair_j[p], min_gap, near2, acc, count)
             else:
-                cx, cy, start, items, mask = build_grid(pos[:, 0], pos[:, 1], min_gap, 0.0, 0.0, width_m, height_m)
+                cx, cy, start, items, mask, ncx, ncy, item_cell = build_grid(pos[:, 0], pos[:, 1], min_gap, 0.0,
+                                                                             0.0, width_m, height_m)
                 for i in range(n):
                     for cell in range(9):  # the 3 x 3 cells around the point
                         gx, gy = cx[i] - 1 + cell % 3, cy[i] - 1 + cell // 3
-                        bk = cell_bucket(gx, gy, mask)
+                        if gx < 0 or gy < 0 or gx >= ncx or gy >= ncy:
+                            continue  # no point outside the grid
+                        key = gy * ncx + gx
+                        bk = cell_bucket(gx, gy, ncx, mask)
                         for q in range(start[bk], start[bk + 1]):
                             j = items[q]
-                            if j <= i or cx[j] != gx or cy[j] != gy:
+                            if j <= i or item_cell[q] != key:
                                 continue  # each pair once; skip other cells sharing the bucket
                             any_pair |= _push_pair(pos, i, j, min_gap, near2, acc, count)
             if any_pair:
@@ -656,7 +692,7 @@ def _sensor_areas(pose, cos_h, sin_h, ahead_m, discs):
     for i in range(n):
         px = pose[i, 0] + ahead_m * cos_h[i]
         py = pose[i, 1] + ahead_m * sin_h[i]
-        out[i] = _area_code(px, py, discs[0], discs[1], discs[2], discs[3], discs[4], discs[5])
+        out[i] = _area_code_in(px, py, discs)
     return out
 
 
@@ -877,3 +913,62 @@ def step_tick(pose, cmd, alive, sending, on_path, params, discs, rng_fn, rng_sta
             on += 1
     counts[C_ON_PATH] = on
     return on
+
+
+# ------------------------------------------------------------------------- initial placement
+
+
+@njit(cache=True, error_model="numpy")
+def place_candidates(pose, placed, cand, min_gap_m):
+    """``world.epuck.foraging.initial_poses``' rejection step: candidates ``cand`` ``(M, 2)`` in
+    order, each kept (written to ``pose[placed]``) if no body kept so far is nearer than
+    ``min_gap_m`` (``hypot(pose - c) >= min_gap_m`` for all, the numpy test exactly), until
+    ``pose`` ``(N, >= 2)`` is full; returns the new ``placed``. The bodies kept are found on a
+    hash grid of cells ``min_gap_m`` wide, so a swarm of 100,000 is placed in O(N) per batch
+    instead of O(N^2)."""
+    n, m = pose.shape[0], cand.shape[0]
+    if placed >= n or m == 0:
+        return placed
+    cell_m = min_gap_m * (1.0 + 1e-9)  # a body nearer than the gap is in one of the 3 x 3 cells
+    x0, y0 = cand[0, 0], cand[0, 1]
+    n_buckets = 16
+    while n_buckets < 2 * n:
+        n_buckets *= 2
+    mask = n_buckets - 1
+    head = np.full(n_buckets, -1, np.int64)
+    nxt = np.empty(n, np.int64)
+    gxs = np.empty(n, np.int64)
+    gys = np.empty(n, np.int64)
+    for i in range(placed):
+        gx = int(math.floor((pose[i, 0] - x0) / cell_m))
+        gy = int(math.floor((pose[i, 1] - y0) / cell_m))
+        gxs[i], gys[i] = gx, gy
+        b = _cell_hash(gx, gy, mask)
+        nxt[i] = head[b]
+        head[b] = i
+    for q in range(m):
+        if placed == n:
+            break
+        cx, cy = cand[q, 0], cand[q, 1]
+        gx = int(math.floor((cx - x0) / cell_m))
+        gy = int(math.floor((cy - y0) / cell_m))
+        free = True
+        for cell in range(9):
+            ox, oy = gx - 1 + cell % 3, gy - 1 + cell // 3
+            j = head[_cell_hash(ox, oy, mask)]
+            while j >= 0:
+                if gxs[j] == ox and gys[j] == oy and not math.hypot(pose[j, 0] - cx, pose[j, 1] - cy) >= min_gap_m:
+                    free = False
+                    break
+                j = nxt[j]
+            if not free:
+                break
+        if free:
+            pose[placed, 0] = cx
+            pose[placed, 1] = cy
+            gxs[placed], gys[placed] = gx, gy
+            b = _cell_hash(gx, gy, mask)
+            nxt[placed] = head[b]
+            head[b] = placed
+            placed += 1
+    return placed
