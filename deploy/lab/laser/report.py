@@ -767,6 +767,18 @@ def full_command(specs: Sequence[str] = (), replications: int | None = None,
     return "\n".join(lines)
 
 
+def _fewer(experiment: str, replications: int) -> str:
+    """`` --replications N`` if the rows have fewer than the shipped spec's (or it is none)."""
+    from swarmloc.config import ConfigError
+    from swarmloc.deploy.lab.experiment import load_spec
+
+    try:
+        full = load_spec(experiment).replications
+    except ConfigError:
+        full = None
+    return "" if full == replications else f" --replications {replications}"
+
+
 def write_from_args(paths: list[Path], args) -> Path:
     """The laser template of ``swarmloc report`` (ConfigError for a file that is not laser
     results)."""
@@ -782,7 +794,7 @@ def write_from_args(paths: list[Path], args) -> Path:
         reps: dict[str, int] = {}
         for r in rows:
             reps[r["experiment"]] = max(reps.get(r["experiment"], 0), r["replication"] + 1)
-        command = "\n".join([*(f"swarmloc experiment {n} --replications {k} --out "
+        command = "\n".join([*(f"swarmloc experiment {n}{_fewer(n, k)} --out "
                                 f"results/{n}.csv" for n, k in reps.items()),
                              "swarmloc report " + " ".join(map(str, paths)) + f" --out {out}"])
     try:
