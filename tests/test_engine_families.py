@@ -318,3 +318,8 @@ def test_laser_spec_runs_in_the_pool_and_resumes(tmp_path):
     row = next(r for r in rows if r["seed"] == "4")
     assert float(row["final_error_m"]) == round(direct.summary["final_error_m"], 6)
     assert results_family([out]) == "laser"
+    report = tmp_path / "report"
+    assert cli_main(["report", str(out), "--out", str(report)]) == 0
+    page = (report / "README.md").read_text()
+    assert "swarmloc experiment laser-tiny --replications 2 --out results/laser-tiny.csv" in page
+    assert len(read_rows(report / "results.csv")) == 2
