@@ -27,7 +27,6 @@ on ``--workers`` cores (each worker also pays the start-up that ``--compile`` me
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import subprocess
 import sys

@@ -257,21 +257,38 @@ def main_run(args) -> int:
                      record_messages=args.record_messages)
 
 
-def main_laser_experiment(args) -> int:
-    from swarmloc.deploy.lab.laser.experiment import main_laser_experiment as run
+#: Verbs that became experiment specs (issue 16): what to run instead.
+RETIRED_VERBS = {
+    "laser-experiment": (
+        "the laser experiments are specs of `swarmloc experiment`: run\n"
+        "  swarmloc experiment laser-table3 --out results/laser-table3.csv   (and laser-kidnap, "
+        "laser-collab, laser-robustness)\n"
+        "  swarmloc report results/laser-table3.csv results/laser-kidnap.csv "
+        "results/laser-collab.csv results/laser-robustness.csv --out docs/laser"),
+    "vision-experiment": (
+        "the vision experiments are the spec `vision` of `swarmloc experiment`: run\n"
+        "  swarmloc experiment vision            (groups: main, heading-jitter, "
+        "heading-jitter-objects; --replications N for fewer runs)\n"
+        "  swarmloc report results/vision.csv --out docs/vision"),
+    "mrclam --all": (
+        "every MRCLAM configuration is the spec `mrclam6` of `swarmloc experiment`: run\n"
+        "  swarmloc experiment mrclam6 [--set dataset=PATH]\n"
+        "  swarmloc report results/mrclam6.csv --out docs/mrclam"),
+}
 
-    return run(args)
 
+def refuse_retired(verb: str):
+    def main_retired(args) -> int:
+        raise ConfigError(f"`swarmloc {verb}` is retired; {RETIRED_VERBS[verb]}")
 
-def main_vision_experiment(args) -> int:
-    from swarmloc.deploy.lab.vision.experiment import main as run
-
-    return run(args)
+    return main_retired
 
 
 def main_mrclam(args) -> int:
     from swarmloc.deploy.lab.replay.mrclam import main as run
 
+    if args.all:
+        return refuse_retired("mrclam --all")(args)
     return run(args)
 
 
@@ -280,8 +297,7 @@ def main_mrclam(args) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     from swarmloc.deploy import warm
-    from swarmloc.deploy.lab import experiment
-    from swarmloc.deploy.lab.epuck import report
+    from swarmloc.deploy.lab import experiment, report
     from swarmloc.deploy.observe import cli as observe_cli
 
     parser = argparse.ArgumentParser(prog="swarmloc", description=__doc__.splitlines()[0])
@@ -360,40 +376,14 @@ def build_parser() -> argparse.ArgumentParser:
 
     tls.add_parser(sub)
 
-    p = sub.add_parser("laser-experiment",
-                       help="run the laser experiments of seeds 002-003 and write their report")
-    p.add_argument("specs", nargs="*", metavar="SPEC",
-                   help="laser specs (default: laser-table3 laser-kidnap laser-collab "
-                        "laser-robustness)")
-    p.add_argument("--replications", type=int, default=None,
-                   help="replications per setting (fewer: a preview the full run resumes from)")
-    p.add_argument("--workers", type=int, default=os.cpu_count() or 1)
-    p.add_argument("--results-dir", default="results", help="where the results CSVs go")
-    p.add_argument("--report", default="docs/laser", help="report folder ('' for none)")
-    p.add_argument("--report-only", action="store_true", help="write the report, run nothing")
-    p.add_argument("--quiet", action="store_true", help="no progress output")
-    p.set_defaults(func=main_laser_experiment)
+    for verb in ("laser-experiment", "vision-experiment"):
+        p = sub.add_parser(verb, help=f"retired: see `swarmloc {verb}` (now a spec of "
+                                      f"`swarmloc experiment`)", add_help=False)
+        p.add_argument("ignored", nargs=argparse.REMAINDER)
+        p.set_defaults(func=refuse_retired(verb))
     from swarmloc.deploy.observe import status
 
     status.add_parser(sub)
-
-    p = sub.add_parser("vision-experiment",
-                       help="run seed 004's vision experiments (with/without detection sharing)")
-    p.add_argument("name", help="vision-exp1, vision-exp2, vision-exp3, a .toml file, or 'all'")
-    p.add_argument("--runs", type=int, default=30, help="seeded runs per sharing mode (default 30)")
-    p.add_argument("--seed", type=int, default=1, help="first run seed (default 1)")
-    g = p.add_mutually_exclusive_group()
-    g.add_argument("--no-sharing", action="store_true", help="run without detection sharing only")
-    g.add_argument("--both", action="store_true", help="run with and without sharing")
-    p.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1))
-    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                   help="scenario override, e.g. --set agent.field.k1_per_s=0.8 (repeatable)")
-    p.add_argument("--csv", default=None, help="write the rows to this CSV file")
-    p.add_argument("--report", default=None, metavar="DIR",
-                   help="write README.md, results.csv and figures to DIR (e.g. docs/vision)")
-    p.add_argument("--detection-n", type=int, default=200, help="placements per detection bin")
-    p.add_argument("--json", action="store_true", help="print the summary as JSON")
-    p.set_defaults(func=main_vision_experiment)
 
     p = sub.add_parser("mrclam", help="run a localizer on an MRCLAM data set (real robots' "
                                       "data) and score it against the ground truth")

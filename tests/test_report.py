@@ -15,6 +15,7 @@ from pathlib import Path
 import pytest
 
 from swarmloc.config import ConfigError
+from swarmloc.deploy.lab import report as engine_report
 from swarmloc.deploy.lab.epuck import claims, report
 from swarmloc.deploy.lab.epuck.report import add_parser, build_report, load_results
 
@@ -177,7 +178,7 @@ def test_cli_refuses_missing_and_malformed_results(tmp_path, capsys):
     add_parser(parser.add_subparsers(dest="command", required=True))
     missing = tmp_path / "nope.csv"
     args = parser.parse_args(["report", str(missing)])
-    assert args.func is report.main_report
+    assert args.func is engine_report.main_report
     with pytest.raises(ConfigError, match="nope.csv: no such results file"):
         args.func(args)
     assert report.main([str(missing)]) == 2

@@ -376,10 +376,32 @@ def test_a_run_is_deterministic_and_counts_bad_input():
     assert faulty["sim_s"] == pytest.approx(2.0)  # the run went on to its end
 
 
-def test_experiment_one_in_miniature():
+def _run_spec_in_process(tmp_path, text):
+    """Every job of a vision spec run in this process with the family's hooks; the rows of
+    the results file, parsed as the report reads them."""
+    import csv
+
+    from swarmloc.deploy.lab.experiment import load_spec, plan
+
+    path = tmp_path / "spec.toml"
+    path.write_text(text)
+    spec = load_spec(path)
+    out = tmp_path / "rows.csv"
+    with out.open("w", newline="") as handle:
+        writer = csv.writer(handle, lineterminator="\n")
+        writer.writerow(vx.columns(spec))
+        for job in plan(spec):
+            writer.writerow(["" if v is None else v for v in vx.row(spec, job, vx.run_job(job))])
+    return vx.read_csv(out)
+
+
+def test_experiment_one_in_miniature(tmp_path):
     """Seed 004 §IV-A, one seed per mode: without sharing the robots collide (their straight
     paths to the ball converge to 0.2 m apart about 0.6 m before it), with sharing they do not."""
-    rows = vx.run_experiments(["vision-exp1"], runs=1, seed=4, workers=1)
+    rows = _run_spec_in_process(tmp_path, (
+        'name = "exp1"\nfamily = "vision"\nreplications = 1\nseed = 4\n[[group]]\n'
+        'name = "main"\nscenarios = ["vision-exp1"]\n[group.grid]\n'
+        '"agent.sharing" = [true, false]\n'))
     assert len(rows) == 2
     on = [r for r in rows if r["sharing"]]
     off = [r for r in rows if not r["sharing"]]
@@ -445,27 +467,24 @@ def test_csv_round_trip_and_report(tmp_path):
 
 
 def test_cli(tmp_path, capsys):
+    """``swarmloc experiment`` runs a vision spec (it replaced ``vision-experiment``); a bad
+    scenario or override stops it with exit 2 before anything runs."""
+    spec = tmp_path / "spec.toml"
+    base = ('name = "v"\nfamily = "vision"\nreplications = 1\n[[group]]\nname = "g"\n'
+            'scenarios = ["{scenario}"]\nduration_s = 1.0\n[group.set]\n'
+            '"agent.sharing" = false\n')
+    spec.write_text(base.format(scenario="vision-exp2"))
     out = tmp_path / "rows.csv"
-    code = cli_main(
-        [
-            "vision-experiment",
-            "vision-exp2",
-            "--runs",
-            "1",
-            "--workers",
-            "1",
-            "--no-sharing",
-            "--set",
-            "setup.duration_s=1.0",
-            "--csv",
-            str(out),
-        ]
-    )
+    code = cli_main(["experiment", str(spec), "--workers", "1", "--quiet", "--out", str(out)])
     assert code == 0
     rows = vx.read_csv(out)
-    assert len(rows) == 1 and rows[0]["sharing"] is False
-    assert "| vision-exp2 | off | 1 |" in capsys.readouterr().out
-    assert cli_main(["vision-experiment", "vision-exp9", "--runs", "1"]) == 2
+    assert len(rows) == 1 and rows[0]["sharing"] is False and rows[0]["sim_s"] <= 1.0
+    assert "experiment v: 1 new rows" in capsys.readouterr().out
+    spec.write_text(base.format(scenario="vision-exp9"))
+    assert cli_main(["experiment", str(spec), "--out", str(tmp_path / "x.csv")]) == 2
     assert "did you mean 'vision-exp" in capsys.readouterr().err
-    assert cli_main(["vision-experiment", "vision-exp1", "--set", "world.seed=3"]) == 2
-    assert cli_main(["vision-experiment", "vision-exp1", "--set", "setup.experiment=4"]) == 2
+    spec.write_text(base.format(scenario="vision-exp1"))
+    assert cli_main(["experiment", str(spec), "--set", "world.seed=3"]) == 2
+    assert cli_main(["experiment", str(spec), "--set", "setup.experiment=4",
+                     "--out", str(tmp_path / "y.csv")]) == 2
+    assert not (tmp_path / "x.csv").exists() and not (tmp_path / "y.csv").exists()

@@ -2,8 +2,10 @@
 
 :mod:`~swarmloc.deploy.lab.experiment` is the experiment engine (``swarmloc experiment``: a spec's
 grid of settings, seeded replications in a pool of processes, resumable results); the report
-engine's family-free parts are :mod:`~swarmloc.deploy.lab.report`; :mod:`~swarmloc.deploy.lab.netns`
+engine is :mod:`~swarmloc.deploy.lab.report` (``swarmloc report``: its family-free parts and the
+registry of each family's template); :mod:`~swarmloc.deploy.lab.netns`
 builds a multi-host lab in Linux network namespaces; :mod:`~swarmloc.deploy.lab.executors` runs an
 experiment's jobs on the local process pool or a Dask cluster. Each robot family's runner, experiment hooks
-and report templates sit in its own folder (``epuck/``, ``laser/``, ``vision/``, ``replay/``).
+(``experiment.py``, registered in the engine's ``FAMILIES``) and report template (``report.py``) sit
+in its own folder (``epuck/``, ``laser/``, ``vision/``, ``replay/``).
 """

@@ -21,20 +21,23 @@ with seed ``seed + r``::
 
 Every setting's scenario is built and validated before anything runs (:func:`plan`), so an unknown
 key, an unknown strategy or an impossible value stops the command with a message naming the group
-and setting. Jobs (one replication of one setting) run with the batch engine in a pool of spawned
+and setting. Jobs (one replication of one setting, the family's ``run_job``) run in a pool of spawned
 processes (never fork: a forked child of a Zenoh process hangs), or on the workers of a Dask
 cluster (``--executor dask --scheduler tcp://HOST:8786``, ``deploy/lab/executors.py``). Each finished job appends one row
 to a CSV file with one write call, so an interrupt loses nothing finished and leaves no partial
 row; running the same command again skips the (setting, seed) pairs already in the file.
-Columns (:meth:`ExperimentSpec.columns`): the setting (experiment, group, setting, scenario,
-strategy, beta, robots, duration_s, seed, replication, one column per grid key), the metrics of
-seed 000 §6 (recruitment_time_s, empty if not reached; robots_found_both; round_trips_total;
-on_path_fraction_mean; lost_total), wall_s, and config_hash (the scenario without its seed): a
-file whose rows were made with another configuration is refused rather than mixed.
+Columns (:meth:`ExperimentSpec.columns`, the family's): always experiment, group, setting,
+scenario, seed, replication, one column per grid key, the family's measures, wall_s and
+config_hash (the scenario without its seed): a file whose rows were made with another
+configuration is refused rather than mixed.
 
-A spec with ``family = "laser"`` runs the laser robots (seeds 002-003) instead: its scenarios are
-laser scenarios, and ``deploy/lab/laser/experiment.py`` builds its settings, runs its jobs and gives
-its columns (:data:`FAMILIES`); the spec format, plan, pool, resume and progress are these.
+Every robot family runs through this engine: a spec's ``family`` (default ``"epuck"``) names an
+entry of :data:`FAMILIES`, the module that builds its settings, runs one job and gives its
+columns and rows (:class:`Family`); the spec format, checks, plan, executors, resume, progress
+and the results file are these, whatever the family. A group may give its own ``replications``
+(at most the spec's ``--replications`` when that is given) and a ``description``;
+``swarmloc experiment SPEC --set KEY=VALUE`` fixes a scenario key in every group (e.g. where
+a data set lives); ``swarmloc experiment --list`` lists the shipped specs of every family.
 """
 
 from __future__ import annotations
@@ -42,8 +45,6 @@ from __future__ import annotations
 import csv
 import dataclasses
 import difflib
-import hashlib
-import importlib
 import io
 import itertools
 import json
@@ -54,7 +55,7 @@ import time
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 from swarmloc.config import ConfigError, from_dict, load_toml
 from swarmloc.deploy.lab.executors import (
@@ -64,27 +65,51 @@ from swarmloc.deploy.lab.executors import (
     make_executor,
     sigterm_as_interrupt,
 )
-from swarmloc.deploy.scenario import Scenario, load_scenario
+from swarmloc.registry import Registry, load_plugins
 
 _NAME = re.compile(r"^[A-Za-z0-9_-]+$")
-_DOTTED_KEY = re.compile(r"^[A-Za-z_]\w*(\.[A-Za-z_]\w*)+$")
-#: Keys a group may not set: the seed comes from the spec's ``seed`` and the replication.
-_RESERVED_KEYS = ("world.seed",)
-
-#: Columns of the results file before the grid keys and after them.
-LEAD_COLUMNS = ("experiment", "group", "setting", "scenario", "strategy", "beta", "robots",
-                "duration_s", "seed", "replication")
-METRIC_COLUMNS = ("recruitment_time_s", "robots_found_both", "round_trips_total",
-                  "on_path_fraction_mean", "lost_total", "wall_s", "config_hash")
-#: Robot families an experiment can run: None for the e-puck family of this module, else the
-#: module (imported when needed) whose ``settings(spec)``, ``run_job(job)``, ``columns(spec)``
-#: and ``row(spec, job, out)`` replace this module's.
-FAMILIES = {"epuck": None, "laser": "swarmloc.deploy.lab.laser.experiment"}
+#: A scenario key: dotted (``agent.strategy``) or, for families whose scenarios are flat tables
+#: (replay), a bare name (``algorithm``); the family's scenario loader refuses unknown keys.
+_SCENARIO_KEY = re.compile(r"^[A-Za-z_]\w*(\.[A-Za-z_]\w*)*$")
 
 
-def _family(name: str):
-    target = FAMILIES[name]
-    return None if target is None else importlib.import_module(target)
+class Family(Protocol):
+    """What a robot family contributes to the engine (a module registered in :data:`FAMILIES`).
+
+    ``settings(spec)`` builds and validates every setting of the spec (an error names group and
+    setting); ``run_job(job)`` runs one replication in a worker process and returns a flat dict;
+    ``columns(spec)`` is the header of the results file and ``row(spec, job, out)`` one row in
+    that order (or ``rows(spec, job, out)``: several rows of one job, written in one call).
+    ``SEED_KEY``: the scenario key the replication's seed is set through (None: ``run_job`` reads
+    ``job.seed``); groups may not set it. Optional ``prepare(log)``: called once in this process
+    before jobs run on this host (e-puck compiles its kernels).
+    """
+
+    SEED_KEY: str | None
+
+    def settings(self, spec: ExperimentSpec) -> list[Setting]: ...
+
+    def run_job(self, job: Job) -> dict: ...
+
+    def columns(self, spec: ExperimentSpec) -> list[str]: ...
+
+    def row(self, spec: ExperimentSpec, job: Job, out: dict) -> list: ...
+
+
+#: Robot families an experiment can run, by the name a spec's ``family`` gives; each entry is
+#: the module (imported when first used) of :class:`Family`'s hooks. Plugins register more.
+FAMILIES: Registry[str] = Registry("experiment family")
+FAMILIES.register("epuck", "swarmloc.deploy.lab.epuck.experiment")
+FAMILIES.register("laser", "swarmloc.deploy.lab.laser.experiment")
+FAMILIES.register("vision", "swarmloc.deploy.lab.vision.experiment")
+FAMILIES.register("replay", "swarmloc.deploy.lab.replay.experiment")
+
+
+def family(name: str) -> Family:
+    """The hooks module of family ``name`` (plugins loaded first if it is not registered)."""
+    if name not in FAMILIES:
+        load_plugins()
+    return FAMILIES.load(name)
 
 
 # -- the spec ---------------------------------------------------------------------------------
@@ -122,10 +147,8 @@ def _check_value(value, where: str) -> None:
 
 
 def _check_key(key: str, where: str) -> None:
-    if not _DOTTED_KEY.match(key):
-        raise ValueError(f"{where} key '{key}': expected a dotted scenario key such as 'agent.strategy'")
-    if key in _RESERVED_KEYS:
-        raise ValueError(f"{where} key '{key}': seeds come from the spec's 'seed' plus the replication")
+    if not _SCENARIO_KEY.match(key):
+        raise ValueError(f"{where} key '{key}': expected a scenario key such as 'agent.strategy'")
 
 
 @dataclass(frozen=True)
@@ -138,8 +161,12 @@ class GroupSpec:
 
     name: str = ""
     scenarios: tuple[str, ...] = ()
+    #: What the group measures (reports show it).
+    description: str = ""
     #: Simulated seconds of every run of the group (default: each scenario's own duration).
     duration_s: float | None = None
+    #: Replications of each setting of this group (default: the spec's).
+    replications: int | None = None
     grid: Any = None
     set: Any = None
 
@@ -152,6 +179,9 @@ class GroupSpec:
             raise ValueError(f"scenarios: listed twice in {list(self.scenarios)}")
         if self.duration_s is not None and not self.duration_s > 0:
             raise ValueError(f"duration_s: must be > 0, got {self.duration_s}")
+        if self.replications is not None and not (
+                isinstance(self.replications, int) and self.replications >= 1):
+            raise ValueError(f"replications: must be >= 1, got {self.replications}")
         object.__setattr__(self, "grid", self._normal_grid(self.grid))
         object.__setattr__(self, "set", self._normal_set(self.set))
         both = {k for k, _ in self.grid} & {k for k, _ in self.set}
@@ -220,6 +250,8 @@ class ExperimentSpec:
         if not _NAME.match(self.name):
             raise ValueError(f"name: expected letters, digits, '_' or '-', got {self.name!r}")
         if self.family not in FAMILIES:
+            load_plugins()
+        if self.family not in FAMILIES:
             raise ValueError(f"family: expected one of {', '.join(FAMILIES)}, got {self.family!r}")
         if self.replications < 1:
             raise ValueError(f"replications: must be >= 1, got {self.replications}")
@@ -231,6 +263,25 @@ class ExperimentSpec:
         for name in names:
             if names.count(name) > 1:
                 raise ValueError(f"group: two groups are named '{name}'")
+        seed_key = getattr(family(self.family), "SEED_KEY", None) or "world.seed"
+        for g in self.group:
+            if seed_key in {k for k, _ in g.grid + g.set}:
+                raise ValueError(f"group '{g.name}' key '{seed_key}': seeds come from the "
+                                 f"spec's 'seed' plus the replication")
+
+    def replications_of(self, group: GroupSpec) -> int:
+        """Replications of each setting of ``group``."""
+        return group.replications or self.replications
+
+    def job_count(self) -> int:
+        """How many jobs the spec plans (without building any scenario)."""
+        total = 0
+        for g in self.group:
+            combos = 1
+            for _, values in g.grid:
+                combos *= len(values)
+            total += len(g.scenarios) * combos * self.replications_of(g)
+        return total
 
     @property
     def groups(self) -> tuple[GroupSpec, ...]:
@@ -245,24 +296,57 @@ class ExperimentSpec:
 
     def columns(self) -> list[str]:
         """The header of the results file."""
-        module = _family(self.family)
-        if module is not None:
-            return module.columns(self)
-        return [*LEAD_COLUMNS, *self.grid_keys(), *METRIC_COLUMNS]
+        return family(self.family).columns(self)
 
 
 def with_overrides(spec: ExperimentSpec, *, replications: int | None = None,
-                   duration_s: float | None = None) -> ExperimentSpec:
-    """The spec with the number of replications and/or every group's duration replaced."""
+                   duration_s: float | None = None, fixed: list[str] = ()) -> ExperimentSpec:
+    """The spec with the number of replications (a group's own is capped to it), every group's
+    duration, and/or ``fixed`` (``KEY=VALUE`` strings, values as TOML) added to every group's
+    ``set`` table replaced."""
     try:
         if duration_s is not None:
             groups = tuple(dataclasses.replace(g, duration_s=float(duration_s)) for g in spec.group)
             spec = dataclasses.replace(spec, group=groups)
+        if fixed:
+            extra = _parse_sets(fixed)
+            groups = []
+            for g in spec.group:
+                grid_keys = {k for k, _ in g.grid}
+                clash = sorted(grid_keys & set(extra))
+                if clash:
+                    raise ValueError(f"--set {clash[0]}: group '{g.name}' varies it in its grid")
+                kept = tuple((k, v) for k, v in g.set if k not in extra)
+                groups.append(dataclasses.replace(g, set=kept + tuple(extra.items())))
+            spec = dataclasses.replace(spec, group=tuple(groups))
         if replications is not None:
-            spec = dataclasses.replace(spec, replications=replications)
-    except ValueError as exc:
+            groups = tuple(dataclasses.replace(g, replications=min(g.replications, replications))
+                           if g.replications is not None else g for g in spec.group)
+            spec = dataclasses.replace(spec, replications=replications, group=groups)
+    except (ValueError, TypeError) as exc:
         raise ConfigError(f"experiment '{spec.name}': {exc}") from None
     return spec
+
+
+def _parse_sets(items: list[str]) -> dict[str, Any]:
+    """``["a.b=1", 'c="x"']`` -> ``{"a.b": 1, "c": "x"}`` (values as TOML literals, or bare
+    text when they are not one)."""
+    import tomllib
+
+    out: dict[str, Any] = {}
+    for item in items:
+        key, sep, text = item.partition("=")
+        key = key.strip()
+        if not sep or not key:
+            raise ValueError(f"--set {item!r}: expected KEY=VALUE")
+        try:
+            value = tomllib.loads(f"v = {text}")["v"]
+        except tomllib.TOMLDecodeError:
+            value = text
+        _check_key(key, "--set")
+        _check_value(value, f"--set '{key}'")
+        out[key] = value
+    return out
 
 
 def _experiments_folder():
@@ -272,6 +356,15 @@ def _experiments_folder():
 def shipped_specs() -> list[str]:
     """Names of the specs shipped in ``deploy/experiments/``."""
     return sorted(p.name[:-5] for p in _experiments_folder().iterdir() if p.name.endswith(".toml"))
+
+
+def list_specs() -> list[tuple[str, str, int, str]]:
+    """(name, family, jobs, description) of every shipped spec, by name."""
+    out = []
+    for name in shipped_specs():
+        spec = load_spec(name)
+        out.append((spec.name, spec.family, spec.job_count(), spec.description))
+    return out
 
 
 def load_spec(name_or_path: str | Path) -> ExperimentSpec:
@@ -318,7 +411,8 @@ class Setting:
 
 @dataclass(frozen=True)
 class Job:
-    """One replication of one setting: ``run_batch(load_scenario(scenario, overrides))``."""
+    """One replication of one setting: the family's ``run_job`` builds the scenario from
+    ``scenario`` and ``overrides`` (the seed included when the family has a ``SEED_KEY``)."""
 
     setting: str
     group: str
@@ -333,48 +427,48 @@ class Job:
     family: str = "epuck"
 
 
-def _config_hash(scenario: Scenario) -> str:
-    data = scenario.to_dict()
-    data["world"].pop("seed", None)
-    blob = json.dumps(data, sort_keys=True, separators=(",", ":")).encode()
-    return hashlib.sha256(blob).hexdigest()[:12]
+def value_text(value) -> str:
+    """A grid or set value as it appears in setting ids and result columns (strings bare)."""
+    return _value_text(value)
+
+
+def override_text(value) -> str:
+    """A value as a TOML literal for :func:`swarmloc.config.apply_overrides`."""
+    return _override_text(value)
+
+
+def setting_grid(g: GroupSpec) -> list[tuple[str, tuple, list[str]]]:
+    """Per scenario and grid combination of ``g``: (setting id, the grid as ``((key, text),
+    ...)``, the overrides: the group's ``set`` then the combination)."""
+    fixed = [f"{k}={_override_text(v)}" for k, v in g.set]
+    out = []
+    for scenario_name in g.scenarios:
+        for combo in g.combinations():
+            grid = tuple((k, _value_text(v)) for k, v in combo)
+            sid = "/".join([g.name, scenario_name, *(f"{k}={t}" for k, t in grid)])
+            out.append((scenario_name, sid, grid,
+                        fixed + [f"{k}={_override_text(v)}" for k, v in combo]))
+    return out
 
 
 def settings(spec: ExperimentSpec) -> list[Setting]:
     """Every setting of the spec, each scenario built once: any error names group and setting."""
-    module = _family(spec.family)
-    if module is not None:
-        return module.settings(spec)
-    out = []
-    for g in spec.group:
-        fixed = [f"{k}={_override_text(v)}" for k, v in g.set]
-        for scenario_name in g.scenarios:
-            for combo in g.combinations():
-                grid = tuple((k, _value_text(v)) for k, v in combo)
-                sid = "/".join([g.name, scenario_name, *(f"{k}={t}" for k, t in grid)])
-                overrides = fixed + [f"{k}={_override_text(v)}" for k, v in combo]
-                if g.duration_s is not None:
-                    overrides.append(f"world.duration_s={_override_text(float(g.duration_s))}")
-                try:
-                    scenario = load_scenario(scenario_name, overrides)
-                except ConfigError as exc:
-                    raise ConfigError(f"experiment '{spec.name}', group '{g.name}', "
-                                      f"setting '{sid}': {exc}") from None
-                out.append(Setting(sid, g.name, scenario_name, tuple(overrides), grid,
-                                   _config_hash(scenario), scenario.world.robots,
-                                   scenario.world.duration_s, scenario.agent.strategy))
-    return out
+    return family(spec.family).settings(spec)
 
 
 def plan(spec: ExperimentSpec) -> list[Job]:
     """Every job of the experiment (setting-major, then replication), after validating every
-    setting. Seeds ``spec.seed + r`` for replication ``r``."""
+    setting. Seeds ``spec.seed + r`` for replication ``r``; the family's ``SEED_KEY`` (if any)
+    is set to it in the job's overrides."""
+    seed_key = getattr(family(spec.family), "SEED_KEY", None)
+    groups = {g.name: g for g in spec.group}
     jobs = []
     for s in settings(spec):
         ticks = max(1, round(s.duration_s * 10))
-        for r in range(spec.replications):
+        for r in range(spec.replications_of(groups[s.group])):
             seed = spec.seed + r
-            jobs.append(Job(s.id, s.group, s.scenario, (*s.overrides, f"world.seed={seed}"), seed, r,
+            seeded = (f"{seed_key}={seed}",) if seed_key else ()
+            jobs.append(Job(s.id, s.group, s.scenario, (*s.overrides, *seeded), seed, r,
                             s.grid, s.config_hash, s.cost or s.robots * ticks, spec.family))
     return jobs
 
@@ -383,35 +477,11 @@ def plan(spec: ExperimentSpec) -> list[Job]:
 
 
 def run_job(job: Job) -> dict:
-    """Run one replication with the batch engine; a flat dict of what the row needs."""
+    """Run one replication with its family's ``run_job``; a flat dict of what the row needs."""
     from swarmloc.registry import load_plugins
 
     load_plugins()  # a worker process (local pool or Dask) imports the spec's plugins too
-    module = _family(job.family)
-    if module is not None:
-        return module.run_job(job)
-    from swarmloc.deploy.lab.epuck.batch import run_batch
-    from swarmloc.deploy.warm import ensure_compiled
-
-    # On a cluster worker's host nobody compiled yet: one process compiles, the others of the
-    # host wait on its lock (a stamp check of a few ms once warm).
-    ensure_compiled()
-    t0 = time.perf_counter()
-    scenario = load_scenario(job.scenario, list(job.overrides))
-    result = run_batch(scenario)
-    m = result.metrics
-    return {
-        "strategy": scenario.agent.strategy,
-        "beta": scenario.agent.beta,
-        "robots": scenario.world.robots,
-        "duration_s": scenario.world.duration_s,
-        "recruitment_time_s": m["recruitment_time_s"],
-        "robots_found_both": m["robots_found_both"],
-        "round_trips_total": m["round_trips_total"],
-        "on_path_fraction_mean": m["on_path_fraction_mean"],
-        "lost_total": int(result.lost_count.sum()),
-        "wall_s": round(time.perf_counter() - t0, 3),
-    }
+    return family(job.family).run_job(job)
 
 
 # -- the results file -------------------------------------------------------------------------
@@ -423,16 +493,11 @@ def _csv_line(values: list) -> bytes:
     return buf.getvalue().encode("utf-8")
 
 
-def _row(spec: ExperimentSpec, job: Job, out: dict) -> list:
-    module = _family(spec.family)
-    if module is not None:
-        return module.row(spec, job, out)
-    grid = dict(job.grid)
-    return [spec.name, job.group, job.setting, job.scenario, out["strategy"], out["beta"],
-            out["robots"], out["duration_s"], job.seed, job.replication,
-            *(grid.get(k) for k in spec.grid_keys()),
-            out["recruitment_time_s"], out["robots_found_both"], out["round_trips_total"],
-            out["on_path_fraction_mean"], out["lost_total"], out["wall_s"], job.config_hash]
+def _rows(spec: ExperimentSpec, job: Job, out: dict) -> list[list]:
+    module = family(spec.family)
+    if hasattr(module, "rows"):
+        return module.rows(spec, job, out)
+    return [module.row(spec, job, out)]
 
 
 def read_done(spec: ExperimentSpec, jobs: list[Job], path: str | Path) -> set[tuple[str, int]]:
@@ -610,12 +675,10 @@ def run_experiment(
                 handle.write(_csv_line(spec.columns()))
             if not todo:
                 return 0
-            if spec.family == "epuck" and executor.on_this_host:
-                # Compile once here, not in every worker at once (deploy/warm.py).
-                from swarmloc.deploy.warm import ensure_compiled
-
-                ensure_compiled(lambda line: print(f"swarmloc: {line}", file=sys.stderr, flush=True)
-                                if mode else None)
+            prepare = getattr(family(spec.family), "prepare", None)
+            if prepare is not None and executor.on_this_host:
+                prepare(lambda line: print(f"swarmloc: {line}", file=sys.stderr, flush=True)
+                        if mode else None)
             bar = _Progress(mode, spec.name, len(todo), sum(j.cost for j in todo),
                             min(executor.workers(), len(todo)), len(done))
             try:
@@ -628,8 +691,8 @@ def run_experiment(
                     except Exception as exc:
                         raise RuntimeError(f"job {job.setting} seed {job.seed} failed: "
                                            f"{type(exc).__name__}: {exc}") from exc
-                    # One write call per row on an unbuffered append-mode file.
-                    handle.write(_csv_line(_row(spec, job, out)))
+                    # One write call per job on an unbuffered append-mode file.
+                    handle.write(b"".join(_csv_line(r) for r in _rows(spec, job, out)))
                     seen.add(key)
                     written += 1
                     bar.advance(job.cost)
@@ -660,9 +723,12 @@ def describe(spec: ExperimentSpec, results_path: str | Path) -> str:
     all_settings = settings(spec)
     jobs = plan(spec)
     done = read_done(spec, jobs, results_path)
+    reps = sorted({spec.replications_of(g) for g in spec.group})
+    reps_text = (f"{reps[0]} replications" if len(reps) == 1
+                 else f"{reps[0]}-{reps[-1]} replications (per group)")
     lines = [
-        (f"experiment {spec.name}: {len(all_settings)} settings x {spec.replications} "
-         f"replications = {len(jobs)} jobs (seeds {spec.seed}..{spec.seed + spec.replications - 1})"),
+        (f"experiment {spec.name}: {len(all_settings)} settings x {reps_text} = {len(jobs)} jobs "
+         f"(seeds from {spec.seed})"),
         f"results: {results_path} ({len(done)} done, {len(jobs) - len(done)} to run)",
         "settings:",
     ]
@@ -674,9 +740,14 @@ def describe(spec: ExperimentSpec, results_path: str | Path) -> str:
 
 def main_experiment(args) -> int:
     """``swarmloc experiment SPEC``: a ConfigError (bad spec, foreign results file) propagates to
-    the CLI, which prints it and exits with 2."""
+    the CLI, which prints it and exits with 2. ``--list``: the shipped specs."""
+    if args.list:
+        print(format_spec_list(list_specs()))
+        return 0
+    if not args.spec:
+        raise ConfigError("experiment: name a spec (shipped or a .toml file), or --list")
     spec = with_overrides(load_spec(args.spec), replications=args.replications,
-                          duration_s=args.duration_s)
+                          duration_s=args.duration_s, fixed=args.set)
     out = Path(args.out) if args.out else default_results_path(spec, args.duration_s)
     if args.dry_run:
         print(describe(spec, out))
@@ -695,13 +766,30 @@ def main_experiment(args) -> int:
     return 0
 
 
+def format_spec_list(specs: list[tuple[str, str, int, str]]) -> str:
+    """The table of ``swarmloc experiment --list``."""
+    head = ("spec", "family", "jobs", "description")
+    widths = [max(len(str(r[i])) for r in [head, *specs]) for i in range(3)]
+    lines = [f"{head[0]:{widths[0]}}  {head[1]:{widths[1]}}  {head[2]:>{widths[2]}}  {head[3]}"]
+    for name, fam, jobs, description in specs:
+        lines.append(f"{name:{widths[0]}}  {fam:{widths[1]}}  {jobs:>{widths[2]}}  "
+                     f"{' '.join(description.split())}")
+    return "\n".join(lines)
+
+
 def add_parser(subparsers) -> None:
     """Register ``swarmloc experiment`` on the CLI's subparsers."""
     p = subparsers.add_parser(
         "experiment", help="run an experiment spec: settings x seeded replications, in parallel",
-        description="Run every setting of an experiment spec x its replications with the batch "
-                    "engine, in parallel; resumable (finished rows are kept and skipped).")
-    p.add_argument("spec", help=f"shipped spec ({', '.join(shipped_specs())}) or a .toml file")
+        description="Run every setting of an experiment spec x its replications, for any robot "
+                    "family, in parallel; resumable (finished rows are kept and skipped).")
+    p.add_argument("spec", nargs="?", default=None,
+                   help="a shipped spec (see --list) or a .toml file")
+    p.add_argument("--list", action="store_true",
+                   help="list the shipped specs of every family (name, family, jobs, description)")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="fix a scenario key in every group, value as TOML (repeatable), e.g. "
+                        "--set dataset=/data/mrclam/MRCLAM_Dataset6")
     p.add_argument("--out", default=None,
                    help="results CSV (default results/<name>.csv; results/<name>-<X>s.csv "
                         "with --duration-s X)")
@@ -723,7 +811,9 @@ def add_parser(subparsers) -> None:
 
 
 __all__ = [
-    "ExperimentSpec", "GroupSpec", "Job", "Setting", "add_parser", "default_results_path",
-    "describe", "execution_order", "load_spec", "main_experiment", "plan", "read_done",
-    "run_experiment", "run_job", "settings", "shipped_specs", "with_overrides",
+    "FAMILIES", "ExperimentSpec", "Family", "GroupSpec", "Job", "Setting", "add_parser",
+    "default_results_path", "describe", "execution_order", "family", "format_spec_list",
+    "list_specs", "load_spec", "main_experiment", "override_text", "plan", "read_done",
+    "run_experiment", "run_job", "setting_grid", "settings", "shipped_specs", "value_text",
+    "with_overrides",
 ]

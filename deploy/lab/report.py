@@ -8,18 +8,31 @@ a Mann-Whitney p-value, seed ranges in words); number formatting; the box-plot s
 papers' figures on Agg-rendered :class:`matplotlib.figure.Figure` objects (no pyplot, no global
 state); and the page's figure list and markdown escaping. The e-puck report
 (:mod:`swarmloc.deploy.lab.epuck.report`) is built from them.
+
+It is also the report command, ``swarmloc report RESULTS.csv [RESULTS.csv ...] [--out DIR]``:
+the results files name their family (the ``experiment`` column's shipped spec, else the columns
+its results files always have, else ``--family``), and that family's template
+(:data:`TEMPLATES`, a :class:`ReportTemplate`) writes the page and the figures: e-puck
+``deploy/lab/epuck/report.py``, laser ``deploy/lab/laser/report.py``, vision
+``deploy/lab/vision/report.py``, replay ``deploy/lab/replay/report.py``.
 """
 
 from __future__ import annotations
 
+import argparse
+import csv
 import math
 import re
+import sys
 from collections import Counter, defaultdict
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+from swarmloc.config import ConfigError
+from swarmloc.registry import Registry
 
 # -- the papers' claims -----------------------------------------------------------------------
 
@@ -291,3 +304,137 @@ def _slug(text: str) -> str:
 
 def _md(text: object) -> str:
     return str(text).replace("|", "\\|").replace("\n", " ")
+
+
+# -- the report command: one engine, a template per family ------------------------------------
+
+
+@dataclass(frozen=True)
+class ReportTemplate:
+    """How one family's results become a page: ``write(paths, args)`` writes the page and its
+    figures (``args``: the options of ``swarmloc report``) and returns the page's path."""
+
+    family: str
+    #: Columns every results file of the family has: tell a file's family when its experiment is
+    #: no shipped spec.
+    columns: frozenset[str]
+    write: Callable[[list[Path], argparse.Namespace], Path]
+
+
+#: Report templates by family (the names of :data:`swarmloc.deploy.lab.experiment.FAMILIES`),
+#: each a ``"module:attribute"`` of a :class:`ReportTemplate`, imported when used.
+TEMPLATES: Registry[str] = Registry("report template")
+TEMPLATES.register("epuck", "swarmloc.deploy.lab.epuck.report:TEMPLATE")
+TEMPLATES.register("laser", "swarmloc.deploy.lab.laser.report:TEMPLATE")
+TEMPLATES.register("vision", "swarmloc.deploy.lab.vision.report:TEMPLATE")
+TEMPLATES.register("replay", "swarmloc.deploy.lab.replay.report:TEMPLATE")
+#: The family of a file nothing else tells (its template's loader names what is missing).
+DEFAULT_FAMILY = "epuck"
+
+
+def _header_and_experiments(path: Path) -> tuple[list[str], set[str]]:
+    try:
+        with path.open(newline="", encoding="utf-8-sig") as handle:
+            reader = csv.reader(handle)
+            header = [h.strip() for h in next(reader, [])]
+            col = header.index("experiment") if "experiment" in header else None
+            names = {row[col] for row in reader if col is not None and len(row) > col}
+    except (OSError, UnicodeDecodeError, csv.Error):
+        return [], set()
+    return header, names
+
+
+def results_family(paths: Sequence[Path], family: str | None = None) -> str:
+    """The family whose template reports ``paths``: ``family`` if given, else the family of the
+    shipped spec each file's ``experiment`` names, else the template whose columns the file has,
+    else :data:`DEFAULT_FAMILY`. Files of two families are a ConfigError."""
+    if family is not None:
+        TEMPLATES.get(family)
+        return family
+    from swarmloc.deploy.lab.experiment import load_spec, shipped_specs
+
+    shipped = set(shipped_specs())
+    found: dict[str, str] = {}
+    for path in paths:
+        header, experiments = _header_and_experiments(Path(path))
+        families = set()
+        for name in sorted(experiments & shipped):
+            families.add(load_spec(name).family)
+        if not families:
+            families = {name for name in TEMPLATES
+                        if TEMPLATES.load(name).columns <= set(header)}
+        if len(families) > 1:
+            raise ConfigError(f"{path}: rows of families {', '.join(sorted(families))}; "
+                              f"give --family or one file per family")
+        found[str(path)] = next(iter(families), DEFAULT_FAMILY)
+    if len(set(found.values())) > 1:
+        raise ConfigError("results of several families: "
+                          + ", ".join(f"{p} ({f})" for p, f in found.items())
+                          + "; report one family at a time")
+    return next(iter(found.values()), DEFAULT_FAMILY)
+
+
+def main_report(args) -> int:
+    """``swarmloc report``: a missing or malformed results file raises ConfigError (exit 2)."""
+    paths = [Path(p) for p in args.results]
+    for path in paths:
+        if not path.is_file():
+            raise ConfigError(f"{path}: no such results file (write one with `swarmloc experiment "
+                              "SPEC`)")
+    name = results_family(paths, args.family)
+    template: ReportTemplate = TEMPLATES.load(name)
+    page = template.write(paths, args)
+    out = page.parent
+    print(f"wrote {page} ({name} report, {len(sorted(out.glob('*.png')))} figures in {out})")
+    return 0
+
+
+def add_parser(subparsers) -> argparse.ArgumentParser:
+    """Register ``swarmloc report RESULTS.csv [RESULTS.csv ...] [--out DIR] ...``."""
+    p = subparsers.add_parser(
+        "report", help="figures and a markdown page from experiment results",
+        description="The page and figures of a family's report from results files of `swarmloc "
+                    "experiment`, our values next to the papers'. The family comes from the "
+                    "results (or --family).")
+    p.add_argument("results", metavar="RESULTS.csv", nargs="+",
+                   help="results file(s) of `swarmloc experiment` (one family)")
+    p.add_argument("--out", default=None, metavar="DIR",
+                   help="folder for the page and the figures (default: the family's, e.g. "
+                        "docs/<experiment>/, docs/laser, docs/vision, docs/mrclam)")
+    p.add_argument("--family", default=None, metavar="FAMILY",
+                   help="the results' family (default: told by the results)")
+    p.add_argument("--title", default=None, help="e-puck: title of the page")
+    p.add_argument("--page", default="README.md", help="e-puck: file name of the page")
+    p.add_argument("--reasons", default=None, metavar="FILE",
+                   help="e-puck: TOML or JSON table: claim id = likely reason of the difference "
+                        "(laser: reasons.toml in the report folder)")
+    p.add_argument("--spec", default=None, metavar="SPEC",
+                   help="the experiment spec the results come from (shipped name or .toml), to "
+                        "recover what its groups fix (default: the shipped spec named like the "
+                        "experiment)")
+    p.add_argument("--regen-command", default=None, metavar="TEXT",
+                   help="the command(s) the page states to regenerate it (default: the "
+                        "experiment and report commands)")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="replay: a scenario key for the runs replayed for the figures, e.g. "
+                        "--set dataset=PATH (repeatable)")
+    p.add_argument("--detection-n", type=int, default=200, metavar="N",
+                   help="vision: placements per bin of the detection table (0: no table)")
+    p.set_defaults(func=main_report)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m swarmloc.deploy.lab.report RESULTS.csv ...``, with the CLI's exit codes."""
+    parser = argparse.ArgumentParser(prog="swarmloc")
+    add_parser(parser.add_subparsers(dest="command", required=True))
+    args = parser.parse_args(["report", *(sys.argv[1:] if argv is None else argv)])
+    try:
+        return args.func(args)
+    except ConfigError as exc:
+        print(f"swarmloc: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -20,6 +20,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+
 from swarmloc.world.epuck import kernels
 
 #: Ground reflectance of the three floor colours (dimensionless, white = 1).

@@ -940,8 +940,8 @@ def place_candidates(pose, placed, cand, min_gap_m):
     gxs = np.empty(n, np.int64)
     gys = np.empty(n, np.int64)
     for i in range(placed):
-        gx = int(math.floor((pose[i, 0] - x0) / cell_m))
-        gy = int(math.floor((pose[i, 1] - y0) / cell_m))
+        gx = int(math.floor((pose[i, 0] - x0) / cell_m))  # noqa: RUF046 -- numba types it
+        gy = int(math.floor((pose[i, 1] - y0) / cell_m))  # noqa: RUF046 -- numba types it
         gxs[i], gys[i] = gx, gy
         b = _cell_hash(gx, gy, mask)
         nxt[i] = head[b]
@@ -950,8 +950,8 @@ def place_candidates(pose, placed, cand, min_gap_m):
         if placed == n:
             break
         cx, cy = cand[q, 0], cand[q, 1]
-        gx = int(math.floor((cx - x0) / cell_m))
-        gy = int(math.floor((cy - y0) / cell_m))
+        gx = int(math.floor((cx - x0) / cell_m))  # noqa: RUF046 -- numba types it
+        gy = int(math.floor((cy - y0) / cell_m))  # noqa: RUF046 -- numba types it
         free = True
         for cell in range(9):
             ox, oy = gx - 1 + cell % 3, gy - 1 + cell // 3

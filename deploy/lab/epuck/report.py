@@ -33,12 +33,10 @@ display, no global matplotlib state.
 
 from __future__ import annotations
 
-import argparse
 import csv
 import json
 import math
 import shlex
-import sys
 from collections import defaultdict
 from collections.abc import Sequence
 from pathlib import Path
@@ -59,8 +57,9 @@ from swarmloc.deploy.lab.epuck.claims import (
     paper_figures,
     unknown_claim_ids,
 )
-from swarmloc.deploy.lab.report import (
+from swarmloc.deploy.lab.report import (  # noqa: F401 (add_parser, main, main_report: the command)
     FigureStatus,
+    ReportTemplate,
     _fmt,
     _fmt_summary,
     _grid,
@@ -71,7 +70,10 @@ from swarmloc.deploy.lab.report import (
     _save,
     _slug,
     _style_boxplot,
+    add_parser,
     describe_seeds,
+    main,
+    main_report,
     summarize,
 )
 
@@ -653,30 +655,6 @@ def build_report(rows: Sequence[dict], out_dir: str | Path, *, title: str, comma
 # -- command line -----------------------------------------------------------------------------
 
 
-def add_parser(subparsers) -> argparse.ArgumentParser:
-    """Register ``swarmloc report RESULTS.csv [--out DIR] [--title ...]``."""
-    p = subparsers.add_parser(
-        "report", help="figures and a markdown page from experiment results",
-        description="Box plots (PNG) and a markdown page from a results CSV of `swarmloc "
-                    "experiment`, with our medians next to the papers' published numbers.")
-    p.add_argument("results", metavar="RESULTS.csv", help="results file of `swarmloc experiment`")
-    p.add_argument("--out", default=None, metavar="DIR",
-                   help="folder for the page and the figures (default: docs/<experiment>/)")
-    p.add_argument("--title", default=None, help="title of the page")
-    p.add_argument("--page", default="README.md", help="file name of the page (default README.md)")
-    p.add_argument("--reasons", default=None, metavar="FILE",
-                   help="TOML or JSON table: claim id = likely reason of the difference")
-    p.add_argument("--spec", default=None, metavar="SPEC",
-                   help="the experiment spec the results come from (shipped name or .toml), to "
-                        "recover the values its groups fix (default: the shipped spec named like "
-                        "the experiment)")
-    p.add_argument("--regen-command", default=None, metavar="TEXT",
-                   help="the command(s) the page states to regenerate it (default: this "
-                        "report command); e.g. the experiment command and this one")
-    p.set_defaults(func=main_report)
-    return p
-
-
 def _load_reasons(path: str) -> dict[str, str]:
     p = Path(path)
     try:
@@ -702,20 +680,18 @@ def _load_reasons(path: str) -> dict[str, str]:
     return dict(data)
 
 
-def main_report(args) -> int:
-    """``swarmloc report``: a missing or malformed results file raises ConfigError (exit 2)."""
-    path = Path(args.results)
-    if not path.is_file():
-        raise ConfigError(f"{path}: no such results file (write one with `swarmloc experiment "
-                          "SPEC`)")
-    try:
-        rows = load_results(path)
-    except ValueError as exc:
-        raise ConfigError(str(exc)) from None
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read the results file: {exc.strerror or exc}") from None
+def write_from_args(paths: list[Path], args) -> Path:
+    """The e-puck template of ``swarmloc report``: ConfigError for a malformed results file."""
+    rows = []
+    for path in paths:
+        try:
+            rows += load_results(path)
+        except ValueError as exc:
+            raise ConfigError(str(exc)) from None
+        except OSError as exc:
+            raise ConfigError(f"{path}: cannot read the results file: {exc.strerror or exc}") from None
     if not rows:
-        raise ConfigError(f"{path}: the results file has a header but no rows")
+        raise ConfigError(f"{', '.join(map(str, paths))}: the results file has a header but no rows")
     reasons = _load_reasons(args.reasons) if args.reasons else {}
     fixed = fixed_values_from_spec(args.spec) if args.spec else None
     experiments = sorted({str(r.get("experiment")) for r in rows})
@@ -724,7 +700,7 @@ def main_report(args) -> int:
                            "papers'")
     command = args.regen_command
     if not command:
-        argv = ["swarmloc", "report", str(path), "--out", str(out)]
+        argv = ["swarmloc", "report", *map(str, paths), "--out", str(out)]
         if args.title:
             argv += ["--title", args.title]
         if args.page != "README.md":
@@ -734,24 +710,10 @@ def main_report(args) -> int:
         if args.spec:
             argv += ["--spec", args.spec]
         command = shlex.join(argv)
-    page = build_report(rows, out, title=title, command=command, seeds_note=describe_seeds(rows),
-                        reasons=reasons, page_name=args.page, results_name=str(path), fixed=fixed)
-    figures = sorted(out.glob("*.png"))
-    print(f"wrote {page} ({len(rows)} runs, {len(figures)} figures in {out})")
-    return 0
+    return build_report(rows, out, title=title, command=command, seeds_note=describe_seeds(rows),
+                        reasons=reasons, page_name=args.page,
+                        results_name=", ".join(map(str, paths)), fixed=fixed)
 
 
-def main(argv: list[str] | None = None) -> int:
-    """``python -m swarmloc.deploy.lab.epuck.report RESULTS.csv ...``, with the CLI's exit codes."""
-    parser = argparse.ArgumentParser(prog="swarmloc")
-    add_parser(parser.add_subparsers(dest="command", required=True))
-    args = parser.parse_args(["report", *(sys.argv[1:] if argv is None else argv)])
-    try:
-        return args.func(args)
-    except ConfigError as exc:
-        print(f"swarmloc: error: {exc}", file=sys.stderr)
-        return 2
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())
+#: This family's template of ``swarmloc report`` (:data:`swarmloc.deploy.lab.report.TEMPLATES`).
+TEMPLATE = ReportTemplate("epuck", frozenset(REQUIRED_COLUMNS), write_from_args)

@@ -21,29 +21,19 @@ hooks of :data:`swarmloc.deploy.lab.experiment.FAMILIES`:
   papers' error-over-time figures.
 
 The shipped specs: ``laser-table3`` (002 table 3), ``laser-kidnap`` (003 fig. 3),
-``laser-collab`` (003 fig. 4) and ``laser-robustness`` (003 §V, 500 runs). ``swarmloc
-laser-experiment`` runs specs and writes the report (``deploy/lab/laser/report.py``);
-``--replications N`` makes a preview that the full run later resumes from;
-``swarmloc experiment laser-kidnap`` runs one spec alone.
+``laser-collab`` (003 fig. 4) and ``laser-robustness`` (003 §V, 500 runs). ``swarmloc experiment
+laser-kidnap`` runs one (``--replications N``: a preview that the full run later resumes from);
+``swarmloc report results/laser-*.csv --out docs/laser`` writes the report from their results
+files (the template of ``deploy/lab/laser/report.py``).
 """
 
 from __future__ import annotations
 
 import json
-import sys
 import time
-from importlib import resources
-from pathlib import Path
 
 from swarmloc.config import ConfigError
-from swarmloc.deploy.lab.experiment import (
-    ExperimentSpec,
-    Job,
-    Setting,
-    load_spec,
-    run_experiment,
-    with_overrides,
-)
+from swarmloc.deploy.lab.experiment import ExperimentSpec, Job, Setting
 from swarmloc.deploy.lab.laser.runner import encode_series_mm, load_laser_scenario, run_laser
 
 #: The setting's description, before the grid keys.
@@ -55,6 +45,8 @@ METRIC_COLUMNS = ("final_error_m", "final_error_max_m", "final_error_sym_m",
                   "localized", "kidnap_step", "settled_before_kidnap", "recovered",
                   "recover_steps", "first_contact_step", "bumps", "cpu_s", "wall_s",
                   "config_hash", "position_error_mm")
+#: The replication's seed is this scenario key.
+SEED_KEY = "world.seed"
 #: The experiments of the report, in its order.
 REPORT_SPECS = ("laser-table3", "laser-kidnap", "laser-collab", "laser-robustness")
 
@@ -134,53 +126,5 @@ def row(spec: ExperimentSpec, job: Job, out: dict) -> list:
             *(_cell(values[c]) for c in METRIC_COLUMNS)]
 
 
-# -- command line -----------------------------------------------------------------------------
-
-
-def shipped_laser_specs() -> list[str]:
-    folder = resources.files("swarmloc.deploy") / "experiments"
-    return sorted(p.name[:-5] for p in folder.iterdir()
-                  if p.name.startswith("laser-") and p.name.endswith(".toml"))
-
-
-def results_path(results_dir: Path, spec: ExperimentSpec) -> Path:
-    """``<results_dir>/<spec name>.csv``. A run with fewer replications writes the same file:
-    its (setting, seed) rows are the first ones of the full run, which resumes from them."""
-    return Path(results_dir) / f"{spec.name}.csv"
-
-
-def main_laser_experiment(args) -> int:
-    """``swarmloc laser-experiment [SPEC ...]``: run laser specs (resumable), then write the
-    report from their results files."""
-    from swarmloc.deploy.lab.laser.report import write_report
-
-    names = args.specs or list(REPORT_SPECS)
-    specs = [with_overrides(load_spec(name), replications=args.replications) for name in names]
-    for spec in specs:
-        if spec.family != "laser":
-            raise ConfigError(f"experiment '{spec.name}' is not a laser experiment "
-                              f"(family = {spec.family!r}); use `swarmloc experiment`")
-    paths = [results_path(Path(args.results_dir), spec) for spec in specs]
-    if not args.report_only:
-        for spec, path in zip(specs, paths):
-            t0 = time.perf_counter()
-            try:
-                written = run_experiment(spec, path, workers=args.workers,
-                                         progress=not args.quiet)
-            except KeyboardInterrupt:
-                print(f"\ninterrupted: finished replications are in {path}; "
-                      f"run the same command again to resume", file=sys.stderr)
-                return 130
-            print(f"experiment {spec.name}: {written} new rows in {path} "
-                  f"({time.perf_counter() - t0:.1f} s)")
-    if args.report:
-        command = "swarmloc laser-experiment " + " ".join(
-            [*names, *([f"--replications {args.replications}"] if args.replications else [])])
-        page = write_report([p for p in paths if p.exists()], Path(args.report), command=command)
-        print(f"report: {page}")
-    return 0
-
-
-__all__ = ["LEAD_COLUMNS", "METRIC_COLUMNS", "REPORT_SPECS", "columns",
-           "main_laser_experiment", "results_path", "row", "run_job", "settings",
-           "shipped_laser_specs"]
+__all__ = ["LEAD_COLUMNS", "METRIC_COLUMNS", "REPORT_SPECS", "SEED_KEY", "columns", "row",
+           "run_job", "settings"]

@@ -743,16 +743,87 @@ def write_report(paths: Sequence[str | Path], out_dir: str | Path, *, command: s
         page += [f"![{name}]({name})" for name in section.figures]
         page.append("")
     page += ["## CPU", "", *_cpu_lines(rows), "", "## Regenerate", "",
-             "These results:", "", "```", command or "swarmloc laser-experiment", "```", "",
+             "These results:", "", "```", command or full_command(), "```", "",
              "The full experiments (every spec's own number of replications):", "", "```",
-             "swarmloc laser-experiment", "```", "",
+             full_command(), "```", "",
              ("The results files are resumable: the same command skips the runs already done; "
              "`--replications N` runs the first N seeds of every setting (a preview the full run "
-             "resumes from). `--report-only` redraws this page from the results."), ""]
+             "resumes from). `swarmloc report` alone redraws this page from the results."), ""]
     path = out / "README.md"
     path.write_text("\n".join(page), encoding="utf-8")
     return path
 
 
-__all__ = ["PAPER_FAILURE", "PAPER_TABLE3", "curve_tail_indexes", "load_laser_results",
-           "series_of", "settle_index", "table3_indexes", "wilson_interval", "write_report"]
+def full_command(specs: Sequence[str] = (), replications: int | None = None,
+                 out: str = "docs/laser") -> str:
+    """The commands that run the laser specs (default: the report's four) and write this page."""
+    from swarmloc.deploy.lab.laser.experiment import REPORT_SPECS
+
+    specs = list(specs) or list(REPORT_SPECS)
+    extra = f" --replications {replications}" if replications else ""
+    lines = [f"swarmloc experiment {name}{extra} --out results/{name}.csv" for name in specs]
+    lines.append("swarmloc report " + " ".join(f"results/{name}.csv" for name in specs)
+                 + f" --out {out}")
+    return "\n".join(lines)
+
+
+def _fewer(experiment: str, replications: int) -> str:
+    """`` --replications N`` if the rows have fewer than the shipped spec's (or it is none)."""
+    from swarmloc.config import ConfigError
+    from swarmloc.deploy.lab.experiment import load_spec
+
+    try:
+        full = load_spec(experiment).replications
+    except ConfigError:
+        full = None
+    return "" if full == replications else f" --replications {replications}"
+
+
+def write_from_args(paths: list[Path], args) -> Path:
+    """The laser template of ``swarmloc report`` (ConfigError for a file that is not laser
+    results)."""
+    from swarmloc.config import ConfigError
+
+    out = Path(args.out) if args.out else Path("docs/laser")
+    command = args.regen_command
+    if not command:
+        try:
+            rows = load_laser_results(paths)
+        except ValueError as exc:
+            raise ConfigError(str(exc)) from None
+        reps: dict[str, int] = {}
+        for r in rows:
+            reps[r["experiment"]] = max(reps.get(r["experiment"], 0), r["replication"] + 1)
+        command = "\n".join([*(f"swarmloc experiment {n}{_fewer(n, k)} --out "
+                                f"results/{n}.csv" for n, k in reps.items()),
+                             "swarmloc report " + " ".join(map(str, paths)) + f" --out {out}"])
+    try:
+        return write_report(paths, out, command=command)
+    except ValueError as exc:
+        raise ConfigError(str(exc)) from None
+
+
+def _template():
+    from swarmloc.deploy.lab.report import ReportTemplate
+
+    return ReportTemplate("laser", frozenset({"experiment", "algorithm", "final_error_m",
+                                              SERIES_COLUMN}), write_from_args)
+
+
+#: This family's template of ``swarmloc report`` (:data:`swarmloc.deploy.lab.report.TEMPLATES`).
+TEMPLATE = _template()
+
+__all__ = [
+    "PAPER_FAILURE",
+    "PAPER_TABLE3",
+    "TEMPLATE",
+    "curve_tail_indexes",
+    "full_command",
+    "load_laser_results",
+    "series_of",
+    "settle_index",
+    "table3_indexes",
+    "wilson_interval",
+    "write_from_args",
+    "write_report",
+]

@@ -8,9 +8,11 @@ ground truth at the same instants. :func:`score` gives per robot the position RM
 over the ticks where ground truth exists (Dataset 6's robot 1 has none after +771.9 s; Vicon
 gaps longer than 0.5 s are skipped). :func:`plot_trajectories` draws estimated vs true paths.
 
-``swarmloc mrclam PATH`` runs one configuration and prints the table; ``--all`` runs every
-algorithm alone and cooperative and writes the report's CSV, table and plots
-(``docs/mrclam/``).
+``swarmloc mrclam PATH`` runs one configuration and prints the table. Every algorithm alone and
+cooperative, the report of ``docs/mrclam/``, is the experiment spec ``mrclam6`` (the replay
+family of the experiment engine, ``deploy/lab/replay/experiment.py``; its report template
+``deploy/lab/replay/report.py``): ``swarmloc experiment mrclam6`` then ``swarmloc report
+results/mrclam6.csv --out docs/mrclam``.
 
 Each robot's generator is ``numpy.random.default_rng([seed, 7, robot_id])``: the same seed gives
 the same estimates, whichever order the robots are stepped in.
@@ -21,7 +23,6 @@ multi-robot cooperative localization and mapping dataset", IJRR 30(8):969-974, 2
 
 from __future__ import annotations
 
-import csv
 import json
 import math
 import time
@@ -286,58 +287,6 @@ def print_scores(result: ReplayResult, scores: dict[int, dict[str, float]], name
     print(f"{'mean':>6} {np.mean(pos):13.3f} {np.mean(head):19.3f}")
 
 
-#: Algorithms that draw random numbers: the report averages them over several seeds.
-STOCHASTIC = ("pf", "cfsga")
-
-
-def evaluate_all(dataset: MrclamDataset, out: Path, seed: int = 0, dt_s: float = DEFAULT_DT_S,
-                 algorithms: Sequence[str] = REPORT_ALGORITHMS, n_seeds: int = 3) -> list[dict]:
-    """Every algorithm alone and cooperative: ``results.csv`` (one row per configuration, seed
-    and robot), ``results.md`` (tables of the RMSE per robot; for the stochastic algorithms the
-    mean over ``n_seeds`` seeds ``seed, seed + 1, ...``) and one trajectory plot per
-    configuration (first seed) in ``out``. Returns the CSV rows."""
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    rows, table_rows = [], []
-    robot_ids = dataset.robot_ids
-    for algorithm in algorithms:
-        seeds = range(seed, seed + (n_seeds if algorithm in STOCHASTIC else 1))
-        for cooperative in (False, True):
-            per_seed = []
-            for run_seed in seeds:
-                config = ReplayConfig(algorithm=algorithm, cooperative=cooperative, seed=run_seed,
-                                      dt_s=dt_s)
-                result = run_replay(dataset, config)
-                scores = score(result)
-                print_scores(result, scores, dataset.name)
-                per_seed.append(scores)
-                if run_seed == seed:
-                    plot_trajectories(result, dataset,
-                                      out / f"trajectories_{config.label.replace('+', '_')}.png")
-                for rid, sc in scores.items():
-                    rows.append({"dataset": dataset.name, "algorithm": algorithm,
-                                 "cooperative": cooperative, "seed": run_seed, "dt_s": dt_s,
-                                 "robot": rid,
-                                 **{k: (round(v, 4) if isinstance(v, float) else v)
-                                    for k, v in sc.items()},
-                                 "cpu_s": round(result.cpu_s, 1)})
-            mean_scores = {rid: {k: float(np.mean([ps[rid][k] for ps in per_seed]))
-                                 for k in ("position_rmse_m", "heading_rmse_rad")}
-                           for rid in robot_ids}
-            label = config.label + (f" ({len(per_seed)} seeds)" if len(per_seed) > 1 else "")
-            table_rows.append((label, mean_scores))
-    with (out / "results.csv").open("w", newline="") as fh:
-        writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
-    text = [f"Dataset {dataset.name}, tick {dt_s} s, seeds from {seed}.", "",
-            "Position RMSE [m]", "", format_table(table_rows, robot_ids), "",
-            "Heading RMSE [rad]", "",
-            format_table(table_rows, robot_ids, "heading_rmse_rad"), ""]
-    (out / "results.md").write_text("\n".join(text))
-    return rows
-
-
 # --------------------------------------------------------------------------------------------
 # Command line
 # --------------------------------------------------------------------------------------------
@@ -358,12 +307,10 @@ def add_arguments(p) -> None:
     p.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
                    help="algorithm parameter, value as JSON (repeatable), e.g. --param fusion=\"sgikf\"")
     p.add_argument("--out", default=None,
-                   help="folder for the trajectory plot and scores.json (with --all: the report)")
+                   help="folder for the trajectory plot and scores.json")
     p.add_argument("--all", action="store_true",
-                   help="run every algorithm alone and cooperative; write results.csv, results.md "
-                        "and the plots to --out (default docs/mrclam)")
-    p.add_argument("--seeds", type=int, default=3,
-                   help="with --all: seeds per stochastic algorithm (pf, cfsga), default 3")
+                   help="retired: every configuration is the spec mrclam6 (`swarmloc experiment "
+                        "mrclam6`, then `swarmloc report results/mrclam6.csv --out docs/mrclam`)")
 
 
 def _parse_params(items: Sequence[str]) -> dict:
@@ -382,12 +329,6 @@ def _parse_params(items: Sequence[str]) -> dict:
 def main(args) -> int:
     """``swarmloc mrclam``: returns 0, or 2 with a message for a bad folder or option."""
     dataset = load_dataset(args.path)
-    if args.all:
-        if args.seeds < 1:
-            raise ValueError(f"--seeds must be >= 1, got {args.seeds}")
-        evaluate_all(dataset, Path(args.out or "docs/mrclam"), seed=args.seed, dt_s=args.dt_s,
-                     n_seeds=args.seeds)
-        return 0
     if not args.calibration_s >= 0:
         raise ValueError(f"--calibration-s must be >= 0, got {args.calibration_s}")
     config = ReplayConfig(algorithm=args.algorithm, cooperative=args.cooperative, seed=args.seed,

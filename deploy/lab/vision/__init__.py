@@ -2,7 +2,7 @@
 
 :mod:`~swarmloc.deploy.lab.vision.runner` draws a seeded layout and runs the vision world with one
 brain per robot (shared detections through an in-process team channel);
-:mod:`~swarmloc.deploy.lab.vision.experiment` repeats runs over seeds and sharing modes, measures
-the detection accuracy and is the ``swarmloc vision-experiment`` command;
-:mod:`~swarmloc.deploy.lab.vision.report` writes ``docs/vision/``.
+:mod:`~swarmloc.deploy.lab.vision.experiment` gives the experiment engine the vision family's
+settings, jobs and columns (``swarmloc experiment vision``) and measures the detection accuracy;
+:mod:`~swarmloc.deploy.lab.vision.report` is its report template (``docs/vision/``).
 """

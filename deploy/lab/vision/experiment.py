@@ -1,24 +1,31 @@
-"""Seed 004's experiments, repeated: runs over seeds and sharing modes, their table, and the
-detection accuracy; the ``swarmloc vision-experiment`` command.
+"""Seed 004's experiments through the experiment engine: the vision family's hooks, the table
+of runs, and the detection accuracy.
 
-:func:`run_experiments` repeats :func:`~swarmloc.deploy.lab.vision.runner.run_vision` over seeds
-and both sharing modes in a pool of spawned processes; :func:`write_csv` / :func:`read_csv` keep
-the rows and :func:`summarize` gives one row per scenario and mode. :func:`detection_accuracy`
-measures the agent's colour-blob detection against the renderer's ground truth (also printed by
-``benchmarks/bench_vision_detection.py``), :func:`frame_costs` what a frame costs. :func:`main`
-runs the command and, with ``--report``, writes the page of
-:mod:`swarmloc.deploy.lab.vision.report`.
+A spec with ``family = "vision"`` (shipped: ``deploy/experiments/vision.toml``) runs vision
+scenarios (``deploy/scenarios/vision/``) with :func:`~swarmloc.deploy.lab.vision.runner.run_vision`,
+replication ``r`` with seed ``seed + r`` (the run's seed draws its layout, world and brains; it is
+no scenario key). This module is the family's entry in
+:data:`swarmloc.deploy.lab.experiment.FAMILIES`: :func:`settings`, :func:`run_job`,
+:func:`columns` and :func:`row`. Columns: the setting (experiment, group, setting, scenario,
+sharing, seed, replication, one column per grid key), the run's measures
+(:data:`METRIC_COLUMNS`, as :func:`~swarmloc.deploy.lab.vision.runner.run_vision` returns them),
+wall_s and config_hash.
+
+:func:`summarize` gives one row per scenario and sharing mode; :func:`write_csv` /
+:func:`read_csv` keep the report's ``results.csv`` (:data:`COLUMNS`, one row per run).
+:func:`detection_accuracy` measures the agent's colour-blob detection against the renderer's
+ground truth (also printed by ``benchmarks/bench_vision_detection.py``), :func:`frame_costs` what
+a frame costs. The report template is :mod:`swarmloc.deploy.lab.vision.report`.
 """
 
 from __future__ import annotations
 
 import csv
 import dataclasses
+import hashlib
+import json
 import math
-import multiprocessing
-import os
 import time
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -26,15 +33,17 @@ import numpy as np
 from swarmloc.agents.vision.brain import decode_image, detections_from_blobs
 from swarmloc.agents.vision.detection import detect_blobs
 from swarmloc.config import ConfigError
-from swarmloc.deploy.lab.vision.runner import EXPERIMENTS, load_vision_scenario, run_vision
+from swarmloc.deploy.lab.experiment import ExperimentSpec, Job, Setting, setting_grid
+from swarmloc.deploy.lab.vision.runner import load_vision_scenario, run_vision
 from swarmloc.world.vision.camera import OBJECT_KINDS, CameraParams, make_object, project, render
 from swarmloc.world.vision.world import (
     VisionWorldConfig,
     encode_image,
 )
 
-# -- experiments --------------------------------------------------------------------------------
+# -- the report's rows --------------------------------------------------------------------------
 
+#: The columns of one run in the report's ``results.csv`` (``experiment``: 1, 2 or 3 of §IV).
 COLUMNS = [
     "experiment",
     "scenario",
@@ -65,65 +74,74 @@ COLUMNS = [
     "cpu_s",
 ]
 
+# -- the engine's hooks -------------------------------------------------------------------------
 
-def _job(args: tuple[str, int, bool, tuple[str, ...]]) -> dict:
+#: No scenario key carries the seed: :func:`run_job` passes ``job.seed`` to ``run_vision``.
+SEED_KEY = None
+#: The setting's description, before the grid keys.
+LEAD_COLUMNS = ("experiment", "group", "setting", "scenario", "sharing", "seed", "replication")
+#: The run's measures, after the grid keys.
+METRIC_COLUMNS = (*(c for c in COLUMNS if c not in ("experiment", "scenario", "sharing", "seed")),
+                  "wall_s", "config_hash")
+
+
+def columns(spec: ExperimentSpec) -> list[str]:
+    """The header of a vision results file."""
+    return [*LEAD_COLUMNS, *spec.grid_keys(), *METRIC_COLUMNS]
+
+
+def _config_hash(scenario) -> str:
+    blob = json.dumps(scenario.to_dict(), sort_keys=True, separators=(",", ":"), default=str)
+    return hashlib.sha256(blob.encode()).hexdigest()[:12]
+
+
+def settings(spec: ExperimentSpec) -> list[Setting]:
+    """Every setting of a vision spec, each scenario loaded and validated once (a group's
+    ``duration_s`` becomes ``setup.duration_s``); an error names the group and the setting."""
+    out = []
+    for g in spec.group:
+        for scenario_name, sid, grid, overrides in setting_grid(g):
+            if g.duration_s is not None:
+                overrides.append(f"setup.duration_s={json.dumps(float(g.duration_s))}")
+            try:
+                scenario = load_vision_scenario(scenario_name, overrides)
+            except (ConfigError, ValueError, TypeError) as exc:
+                raise ConfigError(f"experiment '{spec.name}', group '{g.name}', "
+                                  f"setting '{sid}': {exc}") from None
+            ticks = max(1, round(scenario.setup.duration_s / scenario.world.tick_s))
+            out.append(Setting(
+                sid, g.name, scenario_name, tuple(overrides), grid, _config_hash(scenario), 2,
+                scenario.setup.duration_s, "sharing" if scenario.agent.sharing else "no-sharing",
+                cost=2 * ticks))
+    return out
+
+
+def run_job(job: Job) -> dict:
+    """One seeded run of a vision setting; the measures of ``run_vision`` and wall_s."""
     import cv2
 
     cv2.setNumThreads(1)
-    name, seed, sharing, overrides = args
-    metrics, _ = run_vision(load_vision_scenario(name, list(overrides)), seed, sharing)
-    return metrics
+    t0 = time.perf_counter()
+    metrics, _ = run_vision(load_vision_scenario(job.scenario, list(job.overrides)), job.seed)
+    return {**metrics, "wall_s": round(time.perf_counter() - t0, 3)}
 
 
-def run_experiments(
-    names: list[str],
-    runs: int,
-    seed: int = 1,
-    sharing_modes=(True, False),
-    workers: int = 2,
-    overrides: tuple[str, ...] = (),
-    progress=None,
-) -> list[dict]:
-    """Every (scenario, sharing mode, seed ``seed .. seed + runs - 1``) run; rows in job order."""
-    for name in names:
-        load_vision_scenario(name, list(overrides))  # refuse a bad name or override up front
-    jobs = [
-        (name, seed + r, sharing, tuple(overrides))
-        for name in names
-        for sharing in sharing_modes
-        for r in range(runs)
-    ]
-    if workers <= 1:
-        rows = []
-        for job in jobs:
-            rows.append(_job(job))
-            if progress:
-                progress(len(rows), len(jobs))
-        return rows
-    saved = {k: os.environ.get(k) for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS")}
-    os.environ.update({k: "1" for k in saved})
-    try:
-        with ProcessPoolExecutor(
-            max_workers=workers, mp_context=multiprocessing.get_context("spawn")
-        ) as pool:
-            rows = []
-            for row in pool.map(_job, jobs, chunksize=1):
-                rows.append(row)
-                if progress:
-                    progress(len(rows), len(jobs))
-    finally:
-        for k, v in saved.items():
-            if v is None:
-                os.environ.pop(k, None)
-            else:
-                os.environ[k] = v
-    return rows
+def row(spec: ExperimentSpec, job: Job, out: dict) -> list:
+    """One results row, in :func:`columns` order (None written as an empty cell)."""
+    grid = dict(job.grid)
+    lead = {"experiment": spec.name, "group": job.group, "setting": job.setting,
+            "scenario": job.scenario, "sharing": out["sharing"], "seed": job.seed,
+            "replication": job.replication}
+    values = {**out, "config_hash": job.config_hash}
+    return [*(lead[c] for c in LEAD_COLUMNS), *(grid.get(k) for k in spec.grid_keys()),
+            *(values.get(c) for c in METRIC_COLUMNS)]
 
 
-_TEXT_COLUMNS = ("scenario", "variant", "goals", "true_goals")
+_TEXT_COLUMNS = ("scenario", "variant", "goals", "true_goals", "group", "setting")
 
 
 def write_csv(rows: list[dict], path: str | Path) -> None:
+    """The report's ``results.csv``: :data:`COLUMNS` of each row."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     with path.open("w", newline="") as handle:
@@ -133,14 +151,15 @@ def write_csv(rows: list[dict], path: str | Path) -> None:
             writer.writerow({k: ("" if row.get(k) is None else row.get(k)) for k in COLUMNS})
 
 
-def read_csv(path: str | Path) -> list[dict]:
-    """Rows of :func:`write_csv`, with numbers and booleans parsed back."""
+def read_csv(path: str | Path, text_columns=_TEXT_COLUMNS) -> list[dict]:
+    """Rows of :func:`write_csv` or of a vision results file of the engine, with numbers and
+    booleans parsed back (``text_columns`` stay text)."""
     rows = []
     with Path(path).open(newline="") as handle:
         for raw in csv.DictReader(handle):
             row: dict = {}
             for k, v in raw.items():
-                if k in _TEXT_COLUMNS:
+                if k in text_columns:
                     row[k] = v
                 elif v == "":
                     row[k] = None
@@ -427,104 +446,3 @@ def frame_costs(n_frames: int = 500, seed: int = 20240505) -> tuple[float, float
         short.append(t1 - t0)
         full.append(t2 - t1)
     return float(np.median(short)) * 1e3, float(np.median(full)) * 1e3
-
-
-#: Sensitivity runs of the report (sharing on): what breaks the parallel-start assumption.
-SENSITIVITY = (
-    (
-        (
-            "start headings drawn within ±0.15 rad instead of ±0.03 rad: the brains' assumption of "
-            "parallel bodies at the start is off by up to 0.3 rad"
-        ),
-        EXPERIMENTS,
-        ("setup.heading_jitter_rad=0.15",),
-    ),
-    (
-        (
-            "the same, with the relative heading from the two objects both robots see (Fig. 2, "
-            '`agent.relative_heading = "objects"`; experiment 2, where both see ball and obstacle)'
-        ),
-        ("vision-exp2",),
-        ("setup.heading_jitter_rad=0.15", 'agent.relative_heading="objects"'),
-    ),
-)
-
-
-# -- command line -------------------------------------------------------------------------------
-
-
-def main(args) -> int:
-    """``swarmloc vision-experiment``: run, print the summary, optionally write CSV and report."""
-    import json
-    import sys
-
-    from swarmloc.deploy.lab.vision.report import summary_table, write_report
-
-    if args.runs < 1:
-        raise ConfigError(f"--runs: must be >= 1, got {args.runs}")
-    names = list(EXPERIMENTS) if args.name == "all" else [args.name]
-    modes = (True, False) if args.both else ((False,) if args.no_sharing else (True,))
-    t0 = time.perf_counter()
-
-    def progress(done, total):
-        if done == total or done % max(1, total // 10) == 0:
-            print(
-                f"  {done}/{total} runs ({time.perf_counter() - t0:.0f} s)",
-                file=sys.stderr,
-                flush=True,
-            )
-
-    rows = run_experiments(
-        names, args.runs, args.seed, modes, args.workers, tuple(args.set), progress=progress
-    )
-    summary = summarize(rows)
-    if args.json:
-        print(json.dumps(summary, indent=1))
-    else:
-        print(summary_table(summary))
-    if args.csv:
-        write_csv(rows, args.csv)
-        print(f"rows: {args.csv}", file=sys.stderr)
-    if args.report:
-        import cv2
-
-        cv2.setNumThreads(1)  # the frame timing below is per core
-        sensitivity = []
-        if args.name == "all":
-            n_sens = min(args.runs, 10)
-            for what, names_sens, overrides in SENSITIVITY:
-                sens_rows = run_experiments(
-                    list(names_sens),
-                    n_sens,
-                    args.seed,
-                    (True,),
-                    args.workers,
-                    tuple(args.set) + overrides,
-                )
-                sets = " ".join(f"--set '{o}'" for o in (*args.set, *overrides))
-                command = (
-                    f"swarmloc vision-experiment {names_sens[0] if len(names_sens) == 1 else 'all'}"
-                    f" --runs {n_sens} --seed {args.seed} {sets}"
-                )
-                sensitivity.append((what, command, sens_rows))
-        detection = detection_accuracy(args.detection_n)
-        render_ms, path_ms = frame_costs()
-        timing = (
-            f"Cost per frame (median CPU of 500 frames, 6 objects, this machine): render + detect "
-            f"{render_ms:.2f} ms (target 5 ms); render + JPEG encode + decode + detect + the "
-            f"agent's detections {path_ms:.2f} ms."
-        )
-        cli = f"swarmloc vision-experiment {args.name} --runs {args.runs} --seed {args.seed}"
-        cli += " --both" if args.both else (" --no-sharing" if args.no_sharing else "")
-        cli += "".join(f" --set {s}" for s in args.set)
-        cli += f" --report {args.report}"
-        readme = write_report(
-            args.report,
-            rows,
-            detection,
-            [cli, "python benchmarks/bench_vision_detection.py   # detection table and timing"],
-            timing=timing,
-            sensitivity=sensitivity,
-        )
-        print(f"report: {readme}", file=sys.stderr)
-    return 0

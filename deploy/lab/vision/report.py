@@ -3,16 +3,25 @@
 :func:`write_report` writes the table of measured runs next to the paper's claims
 (:data:`PAPER_CLAIMS`; the paper shows one or two trials per experiment and gives no numbers),
 trajectory and summary figures, the detection accuracy and the command that regenerates it;
-:func:`summary_table` is the table ``swarmloc vision-experiment`` prints.
+:func:`summary_table` is its table of runs. :data:`TEMPLATE` is the vision template of
+``swarmloc report``: the first group of the results (``deploy/experiments/vision.toml``:
+``main``) is the main table, every other group a sensitivity table.
 """
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
 
-from swarmloc.deploy.lab.vision.experiment import detection_table, summarize, write_csv
+from swarmloc.deploy.lab.vision.experiment import (
+    _TEXT_COLUMNS,
+    COLUMNS,
+    detection_table,
+    summarize,
+    write_csv,
+)
 from swarmloc.deploy.lab.vision.runner import EXPERIMENTS, load_vision_scenario, run_vision
 from swarmloc.world.vision.camera import OBJECT_KINDS
 
@@ -259,8 +268,8 @@ def write_report(
 
     ``figure_seeds``: the seed whose trajectories are drawn, per scenario (default: the first
     seed of the rows, for experiment 3 the first of variant "a", where the blind robot must
-    walk around the obstacle). ``sensitivity``: ``(what, command, rows)`` of extra runs, each
-    shown as its own table.
+    walk around the obstacle). ``sensitivity``: ``(what, how, rows)`` of extra runs, each
+    shown as its own table (``how``: a line saying how they were run).
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -360,13 +369,11 @@ def write_report(
     ]
     if sensitivity:
         lines += ["## Sensitivity", ""]
-        for what, command, sens_rows in sensitivity:
+        for what, how, sens_rows in sensitivity:
             lines += [
                 f"{what}:",
                 "",
-                "```sh",
-                command,
-                "```",
+                how,
                 "",
                 summary_table(summarize(sens_rows)),
                 "",
@@ -433,3 +440,102 @@ def write_report(
     readme = out / "README.md"
     readme.write_text("\n".join(lines))
     return readme
+
+
+# -- the template of `swarmloc report` ----------------------------------------------------------
+
+_ORDER = {name: i for i, name in enumerate(EXPERIMENTS)}
+
+
+def _run_order(row: dict):
+    return (_ORDER.get(row["scenario"], len(_ORDER)), row["scenario"], not row["sharing"],
+            row["seed"])
+
+
+def report_rows(engine_rows: list[dict]) -> list[dict]:
+    """Rows of the engine's vision results as the report takes them (:data:`COLUMNS`:
+    ``experiment`` is the scenario's experiment of §IV), in the order scenario, sharing on
+    first, seed."""
+    setup: dict[str, int] = {}
+    out = []
+    for r in engine_rows:
+        name = r["scenario"]
+        if name not in setup:
+            setup[name] = load_vision_scenario(name).setup.experiment
+        out.append({**{k: r.get(k) for k in COLUMNS}, "experiment": setup[name]})
+    return sorted(out, key=_run_order)
+
+
+def _group_how(group, runs: int) -> str:
+    fixed = ", ".join(f"`{k} = {json.dumps(v)}`" for k, v in group.set) or "the scenarios as shipped"
+    return f"Group `{group.name}` of the spec: {fixed}; {runs} runs per scenario."
+
+
+def write_from_args(paths: list[Path], args) -> Path:
+    """The vision template of ``swarmloc report``: main table from the first group, sensitivity
+    tables from the others (described by the spec's groups), the detection accuracy
+    (``--detection-n`` placements per bin) and the cost per frame measured here."""
+    import cv2
+
+    from swarmloc.config import ConfigError
+    from swarmloc.deploy.lab.experiment import load_spec
+    from swarmloc.deploy.lab.vision.experiment import detection_accuracy, frame_costs, read_csv
+
+    rows = []
+    for path in paths:
+        rows += read_csv(path, text_columns=_TEXT_COLUMNS + ("experiment",))
+    if not rows:
+        raise ConfigError(f"{', '.join(map(str, paths))}: no rows to report")
+    missing = [c for c in ("group", "scenario", "sharing", "seed") if c not in rows[0]]
+    if missing:
+        raise ConfigError(f"{paths[0]}: not a vision results file (no {', '.join(missing)})")
+    experiments = sorted({r["experiment"] for r in rows})
+    spec = None
+    try:
+        spec = load_spec(args.spec or experiments[0])
+    except ConfigError:
+        if args.spec:
+            raise
+    groups = list(dict.fromkeys(r["group"] for r in rows))
+    if spec is not None:
+        groups = [g.name for g in spec.group if g.name in groups] + [
+            g for g in groups if g not in {x.name for x in spec.group}]
+    by_group = {g: [r for r in rows if r["group"] == g] for g in groups}
+    main = report_rows(by_group[groups[0]])
+    sensitivity = []
+    for name in groups[1:]:
+        group = next((g for g in spec.group if g.name == name), None) if spec else None
+        sens = report_rows(by_group[name])
+        runs = len({r["seed"] for r in sens})
+        what = (group.description if group is not None and group.description else
+                f"group {name}")
+        how = _group_how(group, runs) if group is not None else f"Group `{name}`; {runs} runs."
+        sensitivity.append((what, how, sens))
+    out = Path(args.out) if args.out else Path("docs/vision")
+    runs = len({r["seed"] for r in main})
+    fewer = f" --replications {runs}" if spec is not None and runs != spec.replications else ""
+    commands = [args.regen_command] if args.regen_command else [
+        f"swarmloc experiment {experiments[0]}{fewer} --out {paths[0]}",
+        "swarmloc report " + " ".join(map(str, paths)) + f" --out {out}",
+    ]
+    commands.append("python benchmarks/bench_vision_detection.py   # detection table and timing")
+    cv2.setNumThreads(1)  # the frame timing below is per core
+    detection = detection_accuracy(args.detection_n) if args.detection_n > 0 else None
+    render_ms, path_ms = frame_costs()
+    timing = (
+        f"Cost per frame (median CPU of 500 frames, 6 objects, this machine): render + detect "
+        f"{render_ms:.2f} ms (target 5 ms); render + JPEG encode + decode + detect + the "
+        f"agent's detections {path_ms:.2f} ms."
+    )
+    return write_report(out, main, detection, commands, timing=timing, sensitivity=sensitivity)
+
+
+def _template():
+    from swarmloc.deploy.lab.report import ReportTemplate
+
+    return ReportTemplate("vision", frozenset({"experiment", "group", "sharing", "goals_correct",
+                                               "collisions"}), write_from_args)
+
+
+#: This family's template of ``swarmloc report`` (:data:`swarmloc.deploy.lab.report.TEMPLATES`).
+TEMPLATE = _template()

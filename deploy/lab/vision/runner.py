@@ -30,14 +30,13 @@ collisions, whether every robot chose the goal the rule gives on the true start 
 time until each robot reaches its (correct) goal (centre within ``body + goal radius +
 reach_margin_m``), and the error of each robot's estimate of its teammate and of the ball.
 
-:func:`~swarmloc.deploy.lab.vision.experiment.run_experiments` repeats runs over seeds and both
-sharing modes in a pool of spawned processes and writes a CSV;
+``swarmloc experiment vision`` (the vision family's hooks,
+:mod:`swarmloc.deploy.lab.vision.experiment`) repeats runs over seeds and both sharing modes;
 :func:`~swarmloc.deploy.lab.vision.report.write_report` writes ``docs/vision/README.md`` with the
 table next to the paper's claims, figures, and the detection accuracy of
 :func:`~swarmloc.deploy.lab.vision.experiment.detection_accuracy` (also printed by
-``benchmarks/bench_vision_detection.py``). Command line: ``swarmloc vision-experiment NAME|all
---runs 30 [--no-sharing | --both] [--report docs/vision]``
-(:func:`swarmloc.deploy.lab.vision.experiment.main`).
+``benchmarks/bench_vision_detection.py``). Command line: ``swarmloc experiment vision`` then
+``swarmloc report results/vision.csv --out docs/vision``.
 """
 
 from __future__ import annotations
