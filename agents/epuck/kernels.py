@@ -38,6 +38,7 @@ import numpy as np
 from numba import njit
 
 from swarmloc.numerics import call_next_double, np_arctan2, np_exp
+from swarmloc.numerics import wrap as _wrap
 
 _PI = math.pi
 _TWO_PI = 2.0 * math.pi
@@ -46,19 +47,6 @@ _TWO_PI = 2.0 * math.pi
 NEST, PREY, NONE = 0, 1, -1
 #: Gains of :func:`brain_update`.
 GAIN_NONE, GAIN_KALMAN, GAIN_FERMI = 0, 1, 2
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def _wrap(angle_rad):
-    """``(a + pi) % (2 pi) - pi``: Python/numpy float modulo semantics, as ``wrap_angle``. For
-    ``x = a + pi`` in ``(-2 pi, 2 pi)`` the modulo is ``x`` or ``x + 2 pi`` exactly (``fmod``
-    returns ``x``; a negative one is moved by the divisor), which skips the call to ``fmod``."""
-    x = angle_rad + _PI
-    if 0.0 <= x < _TWO_PI:
-        return x - _PI  # (-0.0 gives -pi here, +0.0 % 2 pi - pi there: the same)
-    if -_TWO_PI < x < 0.0:
-        return (x + _TWO_PI) - _PI
-    return x % _TWO_PI - _PI
 
 
 @njit(cache=True, inline="always", error_model="numpy")

@@ -226,3 +226,20 @@ def numpy_math() -> np.ndarray:
     on a probe of some 8,000 arguments here; else numpy itself, called from the kernel (about a
     microsecond a call). Probed once per process."""
     return np.array(_numpy_math(), np.int64)
+
+
+_PI = math.pi
+_TWO_PI = 2.0 * math.pi
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def wrap(angle_rad):
+    """``(a + pi) % (2 pi) - pi``: Python/numpy float modulo semantics, as ``wrap_angle``. For
+    ``x = a + pi`` in ``(-2 pi, 2 pi)`` the modulo is ``x`` or ``x + 2 pi`` exactly (``fmod``
+    returns ``x``; a negative one is moved by the divisor), which skips the call to ``fmod``."""
+    x = angle_rad + _PI
+    if 0.0 <= x < _TWO_PI:
+        return x - _PI  # (-0.0 gives -pi here, +0.0 % 2 pi - pi there: the same)
+    if -_TWO_PI < x < 0.0:
+        return (x + _TWO_PI) - _PI
+    return x % _TWO_PI - _PI

@@ -47,7 +47,7 @@ import math
 import numpy as np
 from numba import njit
 
-from swarmloc.numerics import call_next_double, np_arctan2
+from swarmloc.numerics import call_next_double, np_arctan2, wrap
 
 _PI = math.pi
 _TWO_PI = 2.0 * math.pi
@@ -59,19 +59,6 @@ def fill_random(out, fn_address, state_address):
     :func:`~swarmloc.numerics.generator_address`."""
     for q in range(out.shape[0]):
         out[q] = call_next_double(fn_address, state_address)
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def wrap(angle_rad):
-    """``(a + pi) % (2 pi) - pi``: Python/numpy float modulo semantics, as ``wrap_angle``. For
-    ``x = a + pi`` in ``(-2 pi, 2 pi)`` the modulo is ``x`` or ``x + 2 pi`` exactly (``fmod``
-    returns ``x``; a negative one is moved by the divisor), which skips the call to ``fmod``."""
-    x = angle_rad + _PI
-    if 0.0 <= x < _TWO_PI:
-        return x - _PI  # (-0.0 gives -pi here, +0.0 % 2 pi - pi there: the same)
-    if -_TWO_PI < x < 0.0:
-        return (x + _TWO_PI) - _PI
-    return x % _TWO_PI - _PI
 
 
 @njit(cache=True, inline="always", error_model="numpy")
