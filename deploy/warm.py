@@ -47,8 +47,6 @@ LOCK_NAME = "swarmloc-kernels.lock"
 #: What the user is told while the kernels compile (measured on the project's 2-core machine).
 COMPILING_MESSAGE = "compiling kernels, once per machine (under a minute)"
 
-_PACKAGE_ROOT = Path(__file__).resolve().parent.parent  # the folder of the swarmloc package tree
-
 
 def _package_dirs() -> list[Path]:
     """The folders of swarmloc's subpackages, wherever the install put them (an editable install

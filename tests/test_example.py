@@ -6,35 +6,19 @@ from __future__ import annotations
 
 import csv
 import json
-import os
-import signal
 import subprocess
-import sys
 from pathlib import Path
 
 import pytest
+from processes import run_swarmloc
 
 REPO = Path(__file__).resolve().parents[1]
 PLUGIN = REPO / "examples" / "cem_localizer.py"
 SPEC = REPO / "examples" / "cem-vs-baselines.toml"
 
 
-def _swarmloc(args: list[str], cwd: Path, timeout_s: float = 600) -> subprocess.CompletedProcess:
-    proc = subprocess.Popen([sys.executable, "-m", "swarmloc", "--plugin", str(PLUGIN), *args], cwd=cwd,
-                            text=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            stdin=subprocess.DEVNULL, start_new_session=True)
-    try:
-        out, err = proc.communicate(timeout=timeout_s)
-    finally:
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGTERM)  # swarmloc run then stops every piece it started
-            try:
-                proc.communicate(timeout=20)
-            finally:
-                if proc.poll() is None:
-                    os.killpg(proc.pid, signal.SIGKILL)
-                    proc.wait()
-    return subprocess.CompletedProcess(proc.args, proc.returncode, out, err)
+def _swarmloc(args: list[str], cwd: Path) -> subprocess.CompletedProcess:
+    return run_swarmloc(["--plugin", str(PLUGIN), *args], cwd=cwd, timeout_s=600)
 
 
 def test_the_example_passes_the_checker(tmp_path):

@@ -17,38 +17,17 @@ from __future__ import annotations
 
 import json
 import os
-import signal
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
+from processes import run_swarmloc
 
 from swarmloc.deploy.warm import COMPILING_MESSAGE, STAMP_NAME, fingerprint, is_warm, kernel_sources
 from swarmloc.kernel_cache import default_dir
 
 REPO = Path(__file__).resolve().parents[1]
-
-
-def _swarmloc(args: list[str], *, env: dict, cwd: Path, timeout_s: float,
-              python: str = sys.executable) -> subprocess.CompletedProcess:
-    """Run ``swarmloc ARGS`` to its end; on a timeout, SIGTERM (swarmloc run then stops every
-    piece it started), then SIGKILL."""
-    proc = subprocess.Popen([python, "-m", "swarmloc", *args], cwd=cwd, env=env, text=True,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, stdin=subprocess.DEVNULL,
-                            start_new_session=True)
-    try:
-        stdout, stderr = proc.communicate(timeout=timeout_s)
-    except subprocess.TimeoutExpired:
-        proc.send_signal(signal.SIGTERM)
-        try:
-            proc.communicate(timeout=20)
-        finally:
-            if proc.poll() is None:
-                os.killpg(proc.pid, signal.SIGKILL)
-                proc.wait()
-        raise
-    return subprocess.CompletedProcess(proc.args, proc.returncode, stdout, stderr)
 
 
 def _cache_files(cache: Path) -> dict[str, tuple[int, int]]:
@@ -87,7 +66,7 @@ def test_default_run_from_an_empty_kernel_cache_completes_with_the_warm_runs_met
     cache = tmp_path / "numba"
     env = {**os.environ, "NUMBA_CACHE_DIR": str(cache)}
     out = tmp_path / "runs"
-    cold = _swarmloc(["run", "--out", str(out), "--run", "cold"], env=env, cwd=tmp_path, timeout_s=420)
+    cold = run_swarmloc(["run", "--out", str(out), "--run", "cold"], env=env, cwd=tmp_path, timeout_s=420)
     assert cold.returncode == 0, cold.stderr[-3000:]
     assert cold.stderr.count(COMPILING_MESSAGE) == 1, cold.stderr
     for log in (out / "cold" / "logs").iterdir():  # the launcher compiled; no piece had to
@@ -97,7 +76,7 @@ def test_default_run_from_an_empty_kernel_cache_completes_with_the_warm_runs_met
     before = _cache_files(cache)
     assert sum(name.endswith(".nbi") for name in before) > 10
 
-    warm = _swarmloc(["run", "--out", str(out), "--run", "warm"], env=env, cwd=tmp_path, timeout_s=300)
+    warm = run_swarmloc(["run", "--out", str(out), "--run", "warm"], env=env, cwd=tmp_path, timeout_s=300)
     assert warm.returncode == 0, warm.stderr[-3000:]
     assert "compiling kernels" not in warm.stderr
     assert _cache_files(cache) == before, "a warm run compiled something the warm-up did not"
@@ -143,7 +122,7 @@ def test_a_non_editable_install_warms_once_and_runs_from_another_folder(tmp_path
     assert (cache / STAMP_NAME).exists(), outputs
     assert not list(Path(site).rglob("*.nbi")), "kernels cached beside the installed sources"
 
-    run = _swarmloc(["run", "--duration-s", "60", "--run", "installed"], env=env, cwd=elsewhere,
+    run = run_swarmloc(["run", "--duration-s", "60", "--run", "installed"], env=env, cwd=elsewhere,
                     timeout_s=300, python=python)
     assert run.returncode == 0, run.stderr[-3000:]
     assert "compiling kernels" not in run.stderr and "round trips" in run.stdout

@@ -133,12 +133,14 @@ def _run(scenario, ticks: int, corrupt: bool = False) -> dict:
             "poses": state.poses}
 
 
-def _with_seed(scenario, seed: int):
+def _with(scenario, key: str, value):
+    """``scenario`` with one value replaced: in its ``world`` table where that has the key (the
+    families with a world table), else at the top (MRCLAM's flat scenarios)."""
     from swarmloc.deploy.scenario import scenario_from_dict
 
     data = scenario.to_dict()
-    section = data["world"] if "seed" in data.get("world", {}) else data
-    section["seed"] = seed
+    section = data["world"] if key in data.get("world", {}) else data
+    section[key] = value
     return scenario_from_dict(data)
 
 
@@ -195,7 +197,7 @@ def _check_batch(scenario, ticks: int) -> bool:
     from swarmloc.deploy.lab.epuck.batch import run_ticks, swarm_brain
     from swarmloc.world.epuck.foraging import ForagingWorld
 
-    short = _with_duration(scenario, ticks * scenario.scenario.world.tick_s)
+    short = _with(scenario, "duration_s", ticks * scenario.scenario.world.tick_s)
     world = ForagingWorld(short.scenario.world)
     run_ticks(world, swarm_brain(short.scenario))
     served = _run(short, ticks + 1)["poses"]
@@ -203,14 +205,6 @@ def _check_batch(scenario, ticks: int) -> bool:
         raise _fail("batch", f"after {ticks} ticks one brain of {scenario.robots} robots and "
                              f"{scenario.robots} brains of one put the robots in different places")
     return True
-
-
-def _with_duration(scenario, duration_s: float):
-    from swarmloc.deploy.scenario import scenario_from_dict
-
-    data = scenario.to_dict()
-    data["world"]["duration_s"] = duration_s
-    return scenario_from_dict(data)
 
 
 def check(scenario, *, ticks: int = 30, batch: bool = True, pure: bool = True) -> CheckReport:
@@ -229,7 +223,7 @@ def check(scenario, *, ticks: int = 30, batch: bool = True, pure: bool = True) -
                                            f"of seed {scenario.seed}")
     from swarmloc.families import FAMILIES
 
-    other = _run(_with_seed(scenario, scenario.seed + 1), ticks)
+    other = _run(_with(scenario, "seed", scenario.seed + 1), ticks)
     if FAMILIES.get(scenario.family).seeded_world and other["senses"] == first["senses"]:
         raise _fail("determinism", f"seeds {scenario.seed} and {scenario.seed + 1} gave the same "
                                    f"Senses: the seed does not reach the world")
