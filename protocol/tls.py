@@ -206,6 +206,42 @@ def _check_key_matches(cert, key_path: Path, cert_path: Path, what: str) -> None
         raise ValueError(f"TLS {what} private key {key_path}: does not belong to {cert_path}")
 
 
+def _check_certificate(cert_path: Path, key_path: Path, cas: list, ca_path: Path | None,
+                       what: str) -> None:
+    """``cert_path`` valid now, signed by one of ``cas`` (if any), its key ``key_path``."""
+    cert = _load_cert(cert_path, what)
+    _check_valid_now(cert, cert_path, what)
+    for i, ca in enumerate(cas):
+        try:
+            _check_signed_by(cert, ca, cert_path, ca_path, what)
+            break
+        except ValueError:
+            if i == len(cas) - 1:
+                raise
+    _check_key_matches(cert, key_path, cert_path, what)
+
+
+def _load_cas(path: Path) -> list:
+    """Every certificate of a CA file (one CA, or a bundle of several), each valid now."""
+    from cryptography import x509
+
+    _load_cert(path, "root CA certificate")  # names a missing or malformed file
+    cas = x509.load_pem_x509_certificates(path.read_bytes())
+    for ca in cas:
+        _check_valid_now(ca, path, "root CA certificate")
+    return cas
+
+
+def check_files(ca_file: str | os.PathLike, cert_file: str | os.PathLike,
+                key_file: str | os.PathLike) -> None:
+    """ValueError naming the file and the problem unless ``ca_file`` holds CA certificates valid
+    now (one, or a bundle) and ``cert_file`` is a certificate valid now, signed by one of them,
+    whose private key is ``key_file``: the check of :func:`check_tls`, for other TLS users (the
+    Dask executor)."""
+    ca_path = Path(ca_file)
+    _check_certificate(Path(cert_file), Path(key_file), _load_cas(ca_path), ca_path, "certificate")
+
+
 def check_tls(config) -> None:
     """ValueError naming the file and the problem if the TLS files of a ``zenoh.Config`` are
     missing, unreadable, expired or not yet valid, not signed by its ``root_ca_certificate``,
@@ -223,15 +259,10 @@ def check_tls(config) -> None:
         cert_file, key_file = files.get(f"{side}_certificate"), files.get(f"{side}_private_key")
         if cert_file is None and key_file is None:
             continue
-        what = f"{side} certificate"
         if cert_file is None or key_file is None:
             raise ValueError(f"TLS {side}: give both {side}_certificate and {side}_private_key")
-        cert_path = Path(cert_file)
-        cert = _load_cert(cert_path, what)
-        _check_valid_now(cert, cert_path, what)
-        if ca is not None:
-            _check_signed_by(cert, ca, cert_path, ca_path, what)
-        _check_key_matches(cert, Path(key_file), cert_path, what)
+        _check_certificate(Path(cert_file), Path(key_file), [ca] if ca is not None else [],
+                           ca_path, f"{side} certificate")
     if tls.get("enable_mtls") and ca is None:
         raise ValueError("TLS: enable_mtls needs root_ca_certificate (the CA the peer's certificate "
                          "must be signed by)")

@@ -5,6 +5,10 @@ chooses, each in its own process group, each stopped by its id.
 Readiness is read from the processes' own log lines (the scheduler's ``Scheduler at: ADDRESS``,
 a worker's ``Registered to:``), never slept for. ``--no-nanny``: the process we start is the
 worker, so SIGKILL to it is a worker lost with its job (a nanny would restart it in place).
+
+``tls_dir``: a folder made by ``swarmloc tls make-ca`` holding ``scheduler.pem`` and
+``worker.pem`` (``swarmloc tls issue``): the scheduler listens on ``tls://`` and every process
+requires mutual TLS with that CA (Dask's ``--tls-ca-file --tls-cert --tls-key``).
 """
 
 from __future__ import annotations
@@ -20,7 +24,7 @@ import threading
 import time
 from dataclasses import dataclass, field
 
-_SCHEDULER_AT = re.compile(r"Scheduler at:\s+(tcp://127\.0\.0\.1:\d+)")
+_SCHEDULER_AT = re.compile(r"Scheduler at:\s+((?:tcp|tls)://127\.0\.0\.1:\d+)")
 
 
 def _env() -> dict:
@@ -69,6 +73,7 @@ class LocalDaskCluster:
     """``with LocalDaskCluster(workers=2) as cluster: cluster.address``."""
 
     workers: int = 2
+    tls_dir: str | None = None
     address: str = ""
     scheduler: subprocess.Popen | None = None
     worker_procs: list[subprocess.Popen] = field(default_factory=list)
@@ -85,11 +90,21 @@ class LocalDaskCluster:
         self._logs[proc.pid] = _Lines(proc)
         return proc
 
+    def _tls(self, name: str) -> list[str]:
+        if self.tls_dir is None:
+            return []
+        folder = os.fspath(self.tls_dir)
+        return ["--tls-ca-file", os.path.join(folder, "ca.pem"),
+                "--tls-cert", os.path.join(folder, f"{name}.pem"),
+                "--tls-key", os.path.join(folder, f"{name}-key.pem")]
+
     def __enter__(self) -> LocalDaskCluster:  # noqa: PYI034 -- a final test helper
         self._scratch = tempfile.TemporaryDirectory(prefix="swarmloc-dask-")
         try:
             self.scheduler = self._start(["distributed.cli.dask_scheduler", "--host", "127.0.0.1",
-                                          "--port", "0", "--dashboard-address", "127.0.0.1:0"])
+                                          "--port", "0", "--dashboard-address", "127.0.0.1:0",
+                                          *(["--protocol", "tls"] if self.tls_dir else []),
+                                          *self._tls("scheduler")])
             self.address = self._logs[self.scheduler.pid].wait_for(_SCHEDULER_AT, 60).group(1)
             for i in range(self.workers):
                 self.add_worker(f"w{i}")
@@ -102,10 +117,10 @@ class LocalDaskCluster:
         proc = self._start(["distributed.cli.dask_worker", self.address, "--nthreads", "1",
                             "--no-nanny", "--host", "127.0.0.1", "--local-directory",
                             self._scratch.name, "--dashboard-address",
-                            "127.0.0.1:0", "--name", name])
+                            "127.0.0.1:0", "--name", name, *self._tls("worker")])
         self.worker_procs.append(proc)
         logs = self._logs[proc.pid]
-        self.worker_address[proc.pid] = logs.wait_for(r"Start worker at:\s+(tcp://\S+)", 60).group(1)
+        self.worker_address[proc.pid] = logs.wait_for(r"Start worker at:\s+((?:tcp|tls)://\S+)", 60).group(1)
         logs.wait_for("Registered to:", 60)
         return proc
 

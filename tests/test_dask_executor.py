@@ -243,3 +243,157 @@ def test_bad_scheduler_stops_the_command_and_loses_no_row(tmp_path, capsys, case
     if case != "scheduler-for-local":
         assert swarmloc_main(["experiment", str(spec_path), "--out", str(fresh), *flags]) == 2
         assert not fresh.exists()
+
+
+# -- no worker yet ----------------------------------------------------------------------------
+
+
+def test_no_worker_yet_waits_with_a_message_then_runs_every_job(tmp_path):
+    """A scheduler with no worker: the client says so and waits; once a worker registers, every
+    job runs and every row is written once."""
+    spec_path, out = _spec(tmp_path), tmp_path / "out.csv"
+    with LocalDaskCluster(workers=0) as empty:
+        proc = _client(spec_path, out, empty.address)
+        try:
+            waiting = ""
+            for line in proc.stderr:  # the client's own line, not a sleep
+                if "no Dask worker is connected" in line:
+                    waiting = line
+                    break
+            assert empty.address in waiting and "waiting up to 600 s" in waiting
+            assert not out.exists()  # nothing opened while no worker can run a job
+            empty.add_worker("late")
+        finally:
+            stdout, stderr = _stop(proc)
+        assert proc.returncode == 0, stderr
+        assert "4 new rows" in stdout
+        assert _keys(_rows(out)) == _planned(spec_path)
+
+
+def test_no_worker_within_the_timeout_stops_the_command_and_loses_no_row(tmp_path, capsys):
+    spec_path = _spec(tmp_path)
+    out = _results_with_rows(tmp_path, spec_path)
+    before = out.read_bytes()
+    with LocalDaskCluster(workers=0) as empty:
+        flags = ["--executor", "dask", "--scheduler", empty.address, "--worker-timeout-s", "1"]
+        assert swarmloc_main(["experiment", str(spec_path), "--out", str(out), *flags]) == 2
+        err = capsys.readouterr().err
+        assert f"--scheduler {empty.address}: no Dask worker connected within 1 s" in err
+        assert out.read_bytes() == before
+        fresh = tmp_path / "fresh.csv"
+        assert swarmloc_main(["experiment", str(spec_path), "--out", str(fresh), *flags]) == 2
+        assert not fresh.exists()
+        # The scheduler saw the client go: no client is left connected to it.
+        assert "Close client connection" in empty.log(empty.scheduler)
+
+
+# -- Dask's own mutual TLS --------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def pki(tmp_path_factory):
+    """The lab's CA (``swarmloc tls make-ca``) with certificates for the scheduler, the workers and
+    the client, and a second CA with a client certificate of its own."""
+    from swarmloc.protocol.tls import issue, make_ca
+
+    lab, other = tmp_path_factory.mktemp("pki"), tmp_path_factory.mktemp("other-pki")
+    make_ca(lab)
+    for name in ("scheduler", "worker", "client"):
+        issue(lab, name)
+    make_ca(other, common_name="another lab's CA")
+    issue(other, "client")
+    return lab, other
+
+
+@pytest.fixture(scope="module")
+def tls_cluster(pki):
+    with LocalDaskCluster(workers=2, tls_dir=str(pki[0])) as running:
+        assert running.address.startswith("tls://")
+        yield running
+
+
+def _tls_flags(folder: Path, name: str = "client", ca: Path | None = None) -> list[str]:
+    return ["--tls-ca-file", str(ca or folder / "ca.pem"), "--tls-cert", str(folder / f"{name}.pem"),
+            "--tls-key", str(folder / f"{name}-key.pem")]
+
+
+def test_tls_cluster_rows_equal_local_rows(tmp_path, pki, tls_cluster):
+    """A client with the lab's certificate runs the spec on the TLS cluster (its own process, as
+    a user would); the rows equal the local pool's."""
+    spec_path, out = _spec(tmp_path), tmp_path / "tls.csv"
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    done = subprocess.run([sys.executable, "-m", "swarmloc.deploy.cli", "experiment",
+                           str(spec_path), "--out", str(out), "--executor", "dask",
+                           "--scheduler", tls_cluster.address, *_tls_flags(pki[0])],
+                          check=False, stdin=subprocess.DEVNULL, capture_output=True, text=True,
+                          env=env,
+                          timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert "4 new rows" in done.stdout
+    local = tmp_path / "local.csv"
+    run_experiment(load_spec(spec_path), local, workers=2, progress=False)
+    assert _keys(_rows(out)) == _planned(spec_path)
+    assert _model_columns(_rows(out)) == _model_columns(_rows(local))
+    # Every connection the scheduler accepted was TLS, and the workers registered over it.
+    assert all(a.startswith("tls://") for a in tls_cluster.worker_address.values())
+
+
+@pytest.mark.parametrize("case", ["no-certificate", "plain-tcp", "other-ca", "foreign-cert",
+                                  "refused-by-scheduler", "expired", "missing-key", "tls-for-tcp"])
+def test_bad_tls_stops_the_command_and_loses_no_row(tmp_path, capsys, pki, tls_cluster, case):
+    """Each refusal exits 2 with a message naming the problem, before any row is written; the
+    results file keeps every byte."""
+    import datetime as dt
+
+    from swarmloc.protocol.tls import issue
+
+    lab, other = pki
+    spec_path = _spec(tmp_path)
+    out = _results_with_rows(tmp_path, spec_path)
+    before = out.read_bytes()
+    address = tls_cluster.address
+    flags = ["--executor", "dask", "--scheduler", address, "--scheduler-timeout-s", "3"]
+    if case == "no-certificate":
+        message = f"--scheduler {address}: a tls:// scheduler needs this client's certificate"
+    elif case == "plain-tcp":
+        # A client that does not speak TLS at all: the scheduler hangs up on it.
+        flags[3] = address.replace("tls://", "tcp://")
+        message = f"--scheduler {flags[3]}: the scheduler closed the connection"
+    elif case == "other-ca":
+        # Another lab's CA and certificate: this client cannot trust the scheduler's certificate.
+        flags += _tls_flags(other)
+        message = f"--scheduler {address}: the scheduler's TLS certificate is not signed by " \
+                  f"--tls-ca-file {other / 'ca.pem'}"
+    elif case == "foreign-cert":
+        flags += _tls_flags(other, ca=lab / "ca.pem")
+        message = f"Dask TLS certificate {other / 'client.pem'}: not signed by the CA {lab / 'ca.pem'}"
+    elif case == "refused-by-scheduler":
+        # The client trusts both CAs (a bundle) and shows the other lab's certificate: the
+        # scheduler, which trusts only the lab's CA, ends the handshake.
+        bundle = tmp_path / "bundle.pem"
+        bundle.write_bytes((other / "ca.pem").read_bytes() + (lab / "ca.pem").read_bytes())
+        flags += _tls_flags(other, ca=bundle)
+        message = f"--scheduler {address}: the scheduler refused this client's certificate " \
+                  f"{other / 'client.pem'}"
+    elif case == "expired":
+        folder = tmp_path / "pki"
+        folder.mkdir()
+        for name in ("ca.pem", "ca-key.pem"):
+            (folder / name).write_bytes((lab / name).read_bytes())
+        issue(folder, "old", days=1, valid_from=dt.datetime(2024, 1, 1, tzinfo=dt.UTC))
+        flags += _tls_flags(folder, "old")
+        message = f"Dask TLS certificate {folder / 'old.pem'}: expired on 2024-01-02 00:00 UTC"
+    elif case == "missing-key":
+        flags += ["--tls-ca-file", str(lab / "ca.pem"), "--tls-cert", str(lab / "client.pem")]
+        message = "Dask TLS needs --tls-ca-file, --tls-cert and --tls-key; missing --tls-key"
+    else:
+        flags[3] = "tcp://127.0.0.1:8786"
+        flags += _tls_flags(lab)
+        message = "--tls-cert is for a tls:// scheduler; --scheduler is tcp://127.0.0.1:8786 " \
+                  "(did you mean tls://127.0.0.1:8786?)"
+    assert swarmloc_main(["experiment", str(spec_path), "--out", str(out), *flags]) == 2
+    assert message in capsys.readouterr().err
+    assert out.read_bytes() == before
+    fresh = tmp_path / "fresh.csv"
+    assert swarmloc_main(["experiment", str(spec_path), "--out", str(fresh), *flags]) == 2
+    assert not fresh.exists()

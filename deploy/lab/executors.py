@@ -14,8 +14,10 @@ one. Both implement the same small contract (:class:`Executor`)::
 - :class:`DaskExecutor`: ``distributed.Client(address)``, ``client.submit(fn, job, pure=False)``
   and ``distributed.as_completed``. The scheduler reschedules the job of a worker that died on
   another worker; the engine writes each (setting, seed) once even if an executor handed a job
-  back twice. Connecting is checked up front: a malformed address or a scheduler that does not
-  answer raises :class:`~swarmloc.config.ConfigError` (exit 2) before the results file is touched.
+  back twice. Connecting is checked up front: a malformed address, a scheduler that does not
+  answer, a refused or bad TLS certificate (:class:`DaskTls`, ``tls://`` addresses), or no worker
+  within ``worker_timeout_s`` raises :class:`~swarmloc.config.ConfigError` (exit 2) before the
+  results file is touched.
 
 Rows are identical whichever executor computed them except :data:`TIMING_COLUMNS`.
 """
@@ -30,6 +32,7 @@ import sys
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from contextlib import contextmanager
+from dataclasses import dataclass
 from typing import Any, Protocol
 
 from swarmloc.config import ConfigError
@@ -40,6 +43,9 @@ TIMING_COLUMNS = ("wall_s", "cpu_s")
 EXECUTORS = ("local", "dask")
 #: How long the client waits for the Dask scheduler to answer before giving up.
 DEFAULT_SCHEDULER_TIMEOUT_S = 10.0
+#: How long the client waits for a first worker to connect to the scheduler (a batch system may
+#: queue the workers' jobs for a while; ``--worker-timeout-s`` sets it).
+DEFAULT_WORKER_TIMEOUT_S = 600.0
 #: Thread pools of numerical libraries: one thread per worker, the pool is the parallelism.
 _THREAD_VARS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
 #: Addresses a Dask client connects to: ``tcp://HOST:PORT`` (or tls, ws, wss, ucx).
@@ -170,6 +176,47 @@ def check_scheduler_address(address: str | None) -> str:
     return address
 
 
+@dataclass(frozen=True)
+class DaskTls:
+    """The client's side of Dask's mutual TLS (``--tls-ca-file``, ``--tls-cert``, ``--tls-key``,
+    the flags ``dask scheduler`` and ``dask worker`` take too): the CA that signed the scheduler's
+    and workers' certificates, and this client's certificate and key, signed by the same CA
+    (``swarmloc tls make-ca`` / ``issue``; the CA may be the Zenoh router's)."""
+
+    ca_file: str
+    cert: str
+    key: str
+
+    @classmethod
+    def from_flags(cls, ca_file: str | None, cert: str | None, key: str | None) -> DaskTls | None:
+        """None if no flag is given; ConfigError if only some are."""
+        given = {"--tls-ca-file": ca_file, "--tls-cert": cert, "--tls-key": key}
+        if not any(given.values()):
+            return None
+        missing = [flag for flag, v in given.items() if not v]
+        if missing:
+            raise ConfigError(f"Dask TLS needs --tls-ca-file, --tls-cert and --tls-key; "
+                              f"missing {', '.join(missing)}")
+        return cls(str(ca_file), str(cert), str(key))
+
+    def check(self) -> None:
+        """ConfigError naming the file and what is wrong (missing, not PEM, expired, not yet
+        valid, not signed by the CA, a key that is not the certificate's)."""
+        from swarmloc.protocol.tls import check_files
+
+        try:
+            check_files(self.ca_file, self.cert, self.key)
+        except ValueError as exc:
+            raise ConfigError(f"Dask {exc}") from None
+
+    def security(self):
+        """``distributed.Security`` requiring encryption, with these files for the client."""
+        from distributed.security import Security
+
+        return Security(require_encryption=True, tls_ca_file=self.ca_file,
+                        tls_client_cert=self.cert, tls_client_key=self.key)
+
+
 class DaskExecutor:
     """Jobs on the workers of a running Dask scheduler (``dask scheduler``; workers started with
     ``dask worker ADDRESS --nthreads 1``, one job per worker process at a time)."""
@@ -177,21 +224,73 @@ class DaskExecutor:
     name = "dask"
     on_this_host = False
 
-    def __init__(self, address: str | None, timeout_s: float = DEFAULT_SCHEDULER_TIMEOUT_S) -> None:
+    def __init__(self, address: str | None, timeout_s: float = DEFAULT_SCHEDULER_TIMEOUT_S,
+                 tls: DaskTls | None = None,
+                 worker_timeout_s: float = DEFAULT_WORKER_TIMEOUT_S) -> None:
         self.address = check_scheduler_address(address)
+        if self.address.startswith("tls://") and tls is None:
+            raise ConfigError(f"--scheduler {self.address}: a tls:// scheduler needs this client's "
+                              f"certificate: --tls-ca-file CA.pem --tls-cert NAME.pem --tls-key "
+                              f"NAME-key.pem (swarmloc tls issue DIR NAME)")
+        if tls is not None and not self.address.startswith("tls://"):
+            raise ConfigError(f"--tls-cert is for a tls:// scheduler; --scheduler is "
+                              f"{self.address} (did you mean tls://{self.address.split('://', 1)[1]}?)")
+        if worker_timeout_s <= 0:
+            raise ConfigError(f"--worker-timeout-s: must be > 0, got {worker_timeout_s:g}")
+        if tls is not None:
+            tls.check()
         try:
             import distributed
+            from distributed.comm.core import CommClosedError, FatalCommClosedError
         except ImportError:
             raise ConfigError("--executor dask needs Dask distributed on this host and on every "
                               "worker: pip install 'swarmloc[cluster]'") from None
         self._distributed = distributed
+        self._client = None
         try:
-            self._client = distributed.Client(self.address, timeout=timeout_s, set_as_default=False)
+            self._client = distributed.Client(self.address, timeout=timeout_s, set_as_default=False,
+                                              **({"security": tls.security()} if tls else {}))
+        except FatalCommClosedError as exc:
+            # The client's own TLS check of the scheduler's certificate failed.
+            raise ConfigError(f"--scheduler {self.address}: the scheduler's TLS certificate is "
+                              f"not signed by --tls-ca-file {tls.ca_file} or has expired "
+                              f"({exc})") from None
+        except CommClosedError as exc:
+            if tls is None:
+                raise ConfigError(f"--scheduler {self.address}: the scheduler closed the "
+                                  f"connection ({exc}); a TLS scheduler needs tls:// and "
+                                  f"--tls-ca-file/--tls-cert/--tls-key") from None
+            # The scheduler closed the connection in the handshake: it refused our certificate.
+            raise ConfigError(f"--scheduler {self.address}: the scheduler refused this client's "
+                              f"certificate {tls.cert} (TLS handshake closed: {exc}); it must be "
+                              f"signed by the CA the scheduler trusts (its --tls-ca-file)") from None
         except (OSError, TimeoutError) as exc:
+            hint = (" (a TLS scheduler needs tls:// and --tls-ca-file/--tls-cert/--tls-key)"
+                    if tls is None else "")
             raise ConfigError(f"--scheduler {self.address}: no Dask scheduler answered within "
                               f"{timeout_s:g} s ({type(exc).__name__}: {exc}); is `dask scheduler` "
-                              f"running there and the port open?") from None
+                              f"running there and the port open?{hint}") from None
         self._futures: dict[Any, Any] = {}
+        try:
+            self._wait_for_a_worker(worker_timeout_s)
+        except BaseException:
+            self.close()
+            raise
+
+    def _wait_for_a_worker(self, timeout_s: float) -> None:
+        """Return once a worker is connected; say so while waiting; ConfigError after
+        ``timeout_s``."""
+        if self._client.scheduler_info().get("workers"):
+            return
+        print(f"swarmloc: no Dask worker is connected to {self.address} yet; waiting up to "
+              f"{timeout_s:g} s for one (start `dask worker {self.address} --nthreads 1`)",
+              file=sys.stderr, flush=True)
+        try:
+            self._client.wait_for_workers(1, timeout=timeout_s)
+        except TimeoutError:
+            raise ConfigError(f"--scheduler {self.address}: no Dask worker connected within "
+                              f"{timeout_s:g} s (start `dask worker {self.address} --nthreads 1` "
+                              f"on the worker hosts, or wait longer with --worker-timeout-s)") from None
 
     def workers(self) -> int:
         info = self._client.scheduler_info()
@@ -202,10 +301,6 @@ class DaskExecutor:
         jobs = list(jobs)
         if not jobs:
             return
-        if not self._client.scheduler_info().get("workers"):
-            print(f"swarmloc: no Dask worker is connected to {self.address} yet; the jobs wait "
-                  f"for one (start `dask worker {self.address} --nthreads 1`)", file=sys.stderr,
-                  flush=True)
         futures = [self._client.submit(fn, job, pure=False) for job in jobs]
         self._futures = dict(zip(futures, jobs))
         for fut in self._distributed.as_completed(futures, loop=self._client.loop):
@@ -227,14 +322,19 @@ class DaskExecutor:
 
 
 def make_executor(name: str, workers: int | None = None, scheduler: str | None = None,
-                  scheduler_timeout_s: float = DEFAULT_SCHEDULER_TIMEOUT_S) -> Executor:
+                  scheduler_timeout_s: float = DEFAULT_SCHEDULER_TIMEOUT_S,
+                  tls: DaskTls | None = None,
+                  worker_timeout_s: float = DEFAULT_WORKER_TIMEOUT_S) -> Executor:
     """The executor called ``name`` (:data:`EXECUTORS`); ConfigError for a bad combination."""
     if name == "local":
         if scheduler:
             raise ConfigError("--scheduler is for --executor dask (the local pool needs none)")
+        if tls is not None:
+            raise ConfigError("--tls-ca-file/--tls-cert/--tls-key are for --executor dask")
         return LocalPool(workers)
     if name == "dask":
-        return DaskExecutor(scheduler, timeout_s=scheduler_timeout_s)
+        return DaskExecutor(scheduler, timeout_s=scheduler_timeout_s, tls=tls,
+                            worker_timeout_s=worker_timeout_s)
     raise ConfigError(f"--executor: expected one of {', '.join(EXECUTORS)}, got {name!r}")
 
 
@@ -257,6 +357,7 @@ def sigterm_as_interrupt() -> Iterator[None]:
         signal.signal(signal.SIGTERM, previous)
 
 
-__all__ = ["DEFAULT_SCHEDULER_TIMEOUT_S", "EXECUTORS", "TIMING_COLUMNS", "DaskExecutor",
+__all__ = ["DEFAULT_SCHEDULER_TIMEOUT_S", "DEFAULT_WORKER_TIMEOUT_S", "EXECUTORS", "TIMING_COLUMNS",
+           "DaskExecutor", "DaskTls",
            "Executor", "LocalPool", "check_scheduler_address", "make_executor",
            "one_thread_per_worker", "sigterm_as_interrupt"]

@@ -60,7 +60,9 @@ from typing import Any, Protocol
 from swarmloc.config import ConfigError, from_dict, load_toml
 from swarmloc.deploy.lab.executors import (
     DEFAULT_SCHEDULER_TIMEOUT_S,
+    DEFAULT_WORKER_TIMEOUT_S,
     EXECUTORS,
+    DaskTls,
     Executor,
     make_executor,
     sigterm_as_interrupt,
@@ -639,18 +641,22 @@ def run_experiment(
     executor: str | Executor = "local",
     scheduler: str | None = None,
     scheduler_timeout_s: float = DEFAULT_SCHEDULER_TIMEOUT_S,
+    tls: DaskTls | None = None,
+    worker_timeout_s: float = DEFAULT_WORKER_TIMEOUT_S,
 ) -> int:
     """Run every job of ``spec`` not yet in ``results_path`` and append one row per job; return
     the number of rows written.
 
     ``executor``: ``"local"`` runs ``workers`` spawned processes (default: ``os.cpu_count()``);
     ``"dask"`` runs the jobs on the workers of the Dask scheduler at ``scheduler``
-    (``tcp://HOST:8786``); an :class:`~swarmloc.deploy.lab.executors.Executor` instance is used
-    as it is. Whichever runs them, this process writes the rows as the jobs come back (one write
+    (``tcp://HOST:8786``, or ``tls://HOST:8786`` with ``tls`` the client's certificate files),
+    waiting up to ``worker_timeout_s`` for a first worker; an
+    :class:`~swarmloc.deploy.lab.executors.Executor` instance is used as it is. Whichever runs them, this process writes the rows as the jobs come back (one write
     call per row, each (setting, seed) once). ``progress``: True shows a rich bar when stderr is
     a terminal and otherwise a line every ~10 %; "bar" or "lines" force one; False shows nothing.
     ``limit``: run at most that many new jobs. A bad scheduler address or a scheduler that does
-    not answer raises ConfigError before the results file is touched. On KeyboardInterrupt the
+    not answer, a bad or refused TLS certificate, or no worker in time raises ConfigError before
+    the results file is touched. On KeyboardInterrupt the
     jobs are stopped, finished rows stay in the file, and the exception propagates.
     """
     jobs = plan(spec)
@@ -663,7 +669,8 @@ def run_experiment(
         if executor == "local" and workers is not None and workers < 1:
             raise ConfigError(f"workers: must be >= 1, got {workers}")
         executor = make_executor(executor, workers=workers, scheduler=scheduler,
-                                 scheduler_timeout_s=scheduler_timeout_s) if todo else None
+                                 scheduler_timeout_s=scheduler_timeout_s, tls=tls,
+                                 worker_timeout_s=worker_timeout_s) if todo else None
     mode = _progress_mode(progress)
     path.parent.mkdir(parents=True, exist_ok=True)
     new_file = not path.exists() or path.stat().st_size == 0
@@ -752,12 +759,14 @@ def main_experiment(args) -> int:
     if args.dry_run:
         print(describe(spec, out))
         return 0
+    tls = DaskTls.from_flags(args.tls_ca_file, args.tls_cert, args.tls_key)
     t0 = time.perf_counter()
     try:
         with sigterm_as_interrupt():
             written = run_experiment(spec, out, workers=args.workers, progress=not args.quiet,
                                      executor=args.executor, scheduler=args.scheduler,
-                                     scheduler_timeout_s=args.scheduler_timeout_s)
+                                     scheduler_timeout_s=args.scheduler_timeout_s, tls=tls,
+                                     worker_timeout_s=args.worker_timeout_s)
     except KeyboardInterrupt:
         print(f"\ninterrupted: finished replications are in {out}; "
               f"run the same command again to resume", file=sys.stderr)
@@ -807,6 +816,16 @@ def add_parser(subparsers) -> None:
                    help="Dask scheduler address for --executor dask, e.g. tcp://HOST:8786")
     p.add_argument("--scheduler-timeout-s", type=float, default=DEFAULT_SCHEDULER_TIMEOUT_S,
                    help="give up if the scheduler does not answer within this (default 10 s)")
+    p.add_argument("--worker-timeout-s", type=float, default=DEFAULT_WORKER_TIMEOUT_S,
+                   help="give up if no Dask worker has connected to the scheduler within this "
+                        f"(default {DEFAULT_WORKER_TIMEOUT_S:g} s)")
+    tls = p.add_argument_group("Dask TLS (a tls:// scheduler; the flags `dask scheduler` and "
+                               "`dask worker` take, files from `swarmloc tls issue`)")
+    tls.add_argument("--tls-ca-file", default=None, metavar="CA.pem",
+                     help="the CA that signed the scheduler's, the workers' and this certificate")
+    tls.add_argument("--tls-cert", default=None, metavar="NAME.pem", help="this client's certificate")
+    tls.add_argument("--tls-key", default=None, metavar="NAME-key.pem",
+                     help="this client's private key")
     p.set_defaults(func=main_experiment)
 
 
