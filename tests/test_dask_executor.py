@@ -10,64 +10,25 @@ results file (each row is one write call) before it kills or interrupts.
 
 from __future__ import annotations
 
-import csv
 import os
 import signal
 import socket
 import subprocess
 import sys
-import textwrap
 import time
 from pathlib import Path
 
 import pytest
 from dask_cluster import LocalDaskCluster
+from grid_helpers import keys, model_columns, planned, read_rows, spec_file, stop, wait_for_rows
 
 from swarmloc.deploy.cli import main as swarmloc_main
-from swarmloc.deploy.lab.executors import TIMING_COLUMNS, check_scheduler_address
-from swarmloc.deploy.lab.experiment import load_spec, plan, run_experiment
+from swarmloc.deploy.lab.executors import check_scheduler_address
+from swarmloc.deploy.lab.experiment import load_spec, run_experiment
 
 pytestmark = pytest.mark.integration
 
 pytest.importorskip("distributed")
-
-#: A smoke spec: ES1 at 30 simulated seconds, two strategies, two replications (4 jobs).
-SMALL = """\
-name = "small"
-replications = {replications}
-seed = 1
-[[group]]
-name = "g"
-scenarios = ["ES1"]
-duration_s = {duration}
-[group.grid]
-"agent.strategy" = ["NC", "SSGIKF"]
-"""
-
-
-def _spec(tmp_path: Path, replications: int = 2, duration: float = 30.0) -> Path:
-    path = tmp_path / f"small-{replications}-{duration:g}.toml"
-    path.write_text(textwrap.dedent(SMALL.format(replications=replications, duration=duration)))
-    return path
-
-
-def _rows(path: Path) -> list[dict]:
-    with open(path, newline="") as handle:
-        return list(csv.DictReader(handle))
-
-
-def _model_columns(rows: list[dict]) -> list[tuple]:
-    """Each row without its timing columns, sorted by (setting, seed)."""
-    return sorted(tuple((k, v) for k, v in r.items() if k not in TIMING_COLUMNS) for r in rows)
-
-
-def _keys(rows: list[dict]) -> list[tuple[str, int]]:
-    return sorted((r["setting"], int(r["seed"])) for r in rows)
-
-
-def _planned(spec_path: Path) -> list[tuple[str, int]]:
-    return sorted((j.setting, j.seed) for j in plan(load_spec(spec_path)))
-
 
 def _client(spec: Path, out: Path, address: str) -> subprocess.Popen:
     """``swarmloc experiment`` on the cluster, as its own process (progress lines on stderr)."""
@@ -78,26 +39,6 @@ def _client(spec: Path, out: Path, address: str) -> subprocess.Popen:
                             stderr=subprocess.PIPE, text=True, env=env, start_new_session=True)
 
 
-def _wait_for_rows(out: Path, n: int, proc: subprocess.Popen, timeout_s: float = 120.0) -> None:
-    """Until the results file holds ``n`` complete rows (header aside) or the client ended."""
-    end = time.monotonic() + timeout_s
-    while time.monotonic() < end:
-        if out.exists() and out.read_bytes().count(b"\n") >= n + 1:
-            return
-        if proc.poll() is not None:
-            raise AssertionError(f"client ended early ({proc.returncode}): {proc.stderr.read()}")
-        time.sleep(0.01)  # polling a file that the client appends to; not a readiness guess
-    raise AssertionError(f"fewer than {n} rows after {timeout_s} s")
-
-
-def _stop(proc: subprocess.Popen) -> tuple[str, str]:
-    try:
-        return proc.communicate(timeout=120)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait(timeout=10)
-
 
 @pytest.fixture(scope="module")
 def cluster():
@@ -106,29 +47,29 @@ def cluster():
 
 
 def test_dask_rows_equal_local_rows(tmp_path, cluster):
-    spec_path = _spec(tmp_path)
+    spec_path = spec_file(tmp_path)
     spec = load_spec(spec_path)
     local, dask = tmp_path / "local.csv", tmp_path / "dask.csv"
     assert run_experiment(spec, local, workers=2, progress=False) == 4
     assert run_experiment(spec, dask, progress=False, executor="dask",
                           scheduler=cluster.address) == 4
     assert local.read_text().splitlines()[0] == dask.read_text().splitlines()[0]
-    assert _keys(_rows(dask)) == _planned(spec_path)
-    assert _model_columns(_rows(dask)) == _model_columns(_rows(local))
+    assert keys(read_rows(dask)) == planned(spec_path)
+    assert model_columns(read_rows(dask)) == model_columns(read_rows(local))
     # Resume is the same too: nothing left to run.
     assert run_experiment(spec, dask, progress=False, executor="dask",
                           scheduler=cluster.address) == 0
 
 
 def test_cli_shows_progress_and_time_left(tmp_path, cluster):
-    spec_path, out = _spec(tmp_path), tmp_path / "out.csv"
+    spec_path, out = spec_file(tmp_path), tmp_path / "out.csv"
     proc = _client(spec_path, out, cluster.address)
-    stdout, stderr = _stop(proc)
+    stdout, stderr = stop(proc)
     assert proc.returncode == 0, stderr
     assert "4 jobs to run on 2 workers" in stderr
     assert "4/4 jobs (100 %)" in stderr and "left" in stderr
     assert "4 new rows" in stdout
-    assert _keys(_rows(out)) == _planned(spec_path)
+    assert keys(read_rows(out)) == planned(spec_path)
 
 
 def test_worker_killed_mid_run_leaves_every_row_exactly_once(tmp_path):
@@ -138,11 +79,11 @@ def test_worker_killed_mid_run_leaves_every_row_exactly_once(tmp_path):
     once, equal to a local run."""
     import distributed
 
-    spec_path, out = _spec(tmp_path, replications=6, duration=1800.0), tmp_path / "out.csv"
+    spec_path, out = spec_file(tmp_path, replications=6, duration=1800.0), tmp_path / "out.csv"
     with LocalDaskCluster(workers=2) as own:
         proc = _client(spec_path, out, own.address)
         try:
-            _wait_for_rows(out, 1, proc)
+            wait_for_rows(out, 1, proc)
             victim = own.worker_procs[0]
             victim_address = own.worker_address[victim.pid]
             with distributed.Client(own.address, timeout=10, set_as_default=False) as watcher:
@@ -153,38 +94,38 @@ def test_worker_killed_mid_run_leaves_every_row_exactly_once(tmp_path):
                 own.kill_worker(victim)
             assert victim.returncode == -signal.SIGKILL
         finally:
-            _stdout, stderr = _stop(proc)
+            _stdout, stderr = stop(proc)
         assert f"Remove worker addr: {victim_address}" in own.log(own.scheduler)
         assert proc.returncode == 0, stderr
-        rows = _rows(out)
-        assert _keys(rows) == _planned(spec_path)  # every row, none twice
+        rows = read_rows(out)
+        assert keys(rows) == planned(spec_path)  # every row, none twice
         assert own.worker_procs[1].poll() is None
     local = tmp_path / "local.csv"
     run_experiment(load_spec(spec_path), local, workers=2, progress=False)
-    assert _model_columns(rows) == _model_columns(_rows(local))
+    assert model_columns(rows) == model_columns(read_rows(local))
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
 def test_interrupted_client_resumes_with_every_row_once(tmp_path, cluster, sig):
-    spec_path, out = _spec(tmp_path, replications=6, duration=1800.0), tmp_path / "out.csv"
+    spec_path, out = spec_file(tmp_path, replications=6, duration=1800.0), tmp_path / "out.csv"
     proc = _client(spec_path, out, cluster.address)
     try:
-        _wait_for_rows(out, 1, proc)
+        wait_for_rows(out, 1, proc)
         proc.send_signal(sig)
     finally:
-        _, stderr = _stop(proc)
+        _, stderr = stop(proc)
     assert proc.returncode == 130, stderr
     assert "run the same command again to resume" in stderr
     before = out.read_bytes()
-    first = _rows(out)
-    assert 1 <= len(first) < 12 and len(set(_keys(first))) == len(first)
+    first = read_rows(out)
+    assert 1 <= len(first) < 12 and len(set(keys(first))) == len(first)
 
     again = _client(spec_path, out, cluster.address)
-    stdout, stderr = _stop(again)
+    stdout, stderr = stop(again)
     assert again.returncode == 0, stderr
     assert f"{12 - len(first)} new rows" in stdout
     assert out.read_bytes().startswith(before)  # nothing written before is lost or changed
-    assert _keys(_rows(out)) == _planned(spec_path)
+    assert keys(read_rows(out)) == planned(spec_path)
 
 
 # -- bad input --------------------------------------------------------------------------------
@@ -207,13 +148,13 @@ def test_malformed_scheduler_address_is_refused(address, message):
 def _results_with_rows(tmp_path: Path, spec_path: Path) -> Path:
     out = tmp_path / "out.csv"
     run_experiment(load_spec(spec_path), out, workers=1, progress=False, limit=2)
-    assert len(_rows(out)) == 2
+    assert len(read_rows(out)) == 2
     return out
 
 
 @pytest.mark.parametrize("case", ["malformed", "unreachable", "no-scheduler", "scheduler-for-local"])
 def test_bad_scheduler_stops_the_command_and_loses_no_row(tmp_path, capsys, case):
-    spec_path = _spec(tmp_path)
+    spec_path = spec_file(tmp_path)
     out = _results_with_rows(tmp_path, spec_path)
     before = out.read_bytes()
     holder = None
@@ -251,7 +192,7 @@ def test_bad_scheduler_stops_the_command_and_loses_no_row(tmp_path, capsys, case
 def test_no_worker_yet_waits_with_a_message_then_runs_every_job(tmp_path):
     """A scheduler with no worker: the client says so and waits; once a worker registers, every
     job runs and every row is written once."""
-    spec_path, out = _spec(tmp_path), tmp_path / "out.csv"
+    spec_path, out = spec_file(tmp_path), tmp_path / "out.csv"
     with LocalDaskCluster(workers=0) as empty:
         proc = _client(spec_path, out, empty.address)
         try:
@@ -264,14 +205,14 @@ def test_no_worker_yet_waits_with_a_message_then_runs_every_job(tmp_path):
             assert not out.exists()  # nothing opened while no worker can run a job
             empty.add_worker("late")
         finally:
-            stdout, stderr = _stop(proc)
+            stdout, stderr = stop(proc)
         assert proc.returncode == 0, stderr
         assert "4 new rows" in stdout
-        assert _keys(_rows(out)) == _planned(spec_path)
+        assert keys(read_rows(out)) == planned(spec_path)
 
 
 def test_no_worker_within_the_timeout_stops_the_command_and_loses_no_row(tmp_path, capsys):
-    spec_path = _spec(tmp_path)
+    spec_path = spec_file(tmp_path)
     out = _results_with_rows(tmp_path, spec_path)
     before = out.read_bytes()
     with LocalDaskCluster(workers=0) as empty:
@@ -320,7 +261,7 @@ def _tls_flags(folder: Path, name: str = "client", ca: Path | None = None) -> li
 def test_tls_cluster_rows_equal_local_rows(tmp_path, pki, tls_cluster):
     """A client with the lab's certificate runs the spec on the TLS cluster (its own process, as
     a user would); the rows equal the local pool's."""
-    spec_path, out = _spec(tmp_path), tmp_path / "tls.csv"
+    spec_path, out = spec_file(tmp_path), tmp_path / "tls.csv"
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     done = subprocess.run([sys.executable, "-m", "swarmloc.deploy.cli", "experiment",
                            str(spec_path), "--out", str(out), "--executor", "dask",
@@ -332,8 +273,8 @@ def test_tls_cluster_rows_equal_local_rows(tmp_path, pki, tls_cluster):
     assert "4 new rows" in done.stdout
     local = tmp_path / "local.csv"
     run_experiment(load_spec(spec_path), local, workers=2, progress=False)
-    assert _keys(_rows(out)) == _planned(spec_path)
-    assert _model_columns(_rows(out)) == _model_columns(_rows(local))
+    assert keys(read_rows(out)) == planned(spec_path)
+    assert model_columns(read_rows(out)) == model_columns(read_rows(local))
     # Every connection the scheduler accepted was TLS, and the workers registered over it.
     assert all(a.startswith("tls://") for a in tls_cluster.worker_address.values())
 
@@ -348,7 +289,7 @@ def test_bad_tls_stops_the_command_and_loses_no_row(tmp_path, capsys, pki, tls_c
     from swarmloc.protocol.tls import issue
 
     lab, other = pki
-    spec_path = _spec(tmp_path)
+    spec_path = spec_file(tmp_path)
     out = _results_with_rows(tmp_path, spec_path)
     before = out.read_bytes()
     address = tls_cluster.address

@@ -31,6 +31,7 @@ import signal
 import sys
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
 from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any, Protocol
@@ -46,6 +47,8 @@ DEFAULT_SCHEDULER_TIMEOUT_S = 10.0
 #: How long the client waits for a first worker to connect to the scheduler (a batch system may
 #: queue the workers' jobs for a while; ``--worker-timeout-s`` sets it).
 DEFAULT_WORKER_TIMEOUT_S = 600.0
+#: How many times one run of the local pool starts a fresh pool after a worker process died.
+MAX_POOL_RESTARTS = 3
 #: Thread pools of numerical libraries: one thread per worker, the pool is the parallelism.
 _THREAD_VARS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
 #: Addresses a Dask client connects to: ``tcp://HOST:PORT`` (or tls, ws, wss, ucx).
@@ -100,7 +103,18 @@ def one_thread_per_worker() -> Iterator[None]:
 
 
 class LocalPool:
-    """``workers`` spawned processes on this host (started with the first jobs)."""
+    """``workers`` spawned processes on this host, started with the first jobs and kept for every
+    later job (each process imports the engine and loads the kernels once, on its first job).
+
+    A pool given to :func:`~swarmloc.deploy.lab.experiment.run_experiment` as an instance stays
+    up after the run (its owner calls :meth:`close`), so successive runs in one Python process
+    pay the start-up once; ``swarmloc experiment`` makes its own and closes it.
+
+    A worker process that dies (SIGKILL, out of memory) breaks a ``ProcessPoolExecutor``: every
+    job not yet handed back fails with ``BrokenProcessPool``. Those jobs run again on a fresh
+    pool, up to :data:`MAX_POOL_RESTARTS` times a run (a job that kills its worker every time
+    then fails the run, naming it); each (setting, seed) is still written once, by the engine.
+    """
 
     name = "local"
     on_this_host = True
@@ -113,25 +127,59 @@ class LocalPool:
         self._size = workers
         self._pool: ProcessPoolExecutor | None = None
         self._futures: dict[Future, Any] = {}
+        #: Pools started again after a worker died, this run (for the tests and the log).
+        self.restarts = 0
 
     def workers(self) -> int:
         return self._size
 
+    def pids(self) -> list[int]:
+        """The process ids of the pool's live workers (none before the first job)."""
+        processes = (getattr(self._pool, "_processes", None) or {}) if self._pool else {}
+        return sorted(pid for pid, p in processes.items() if p.is_alive())
+
+    def _submit(self, fn, jobs: list) -> set[Future]:
+        with one_thread_per_worker():  # processes start at submit: one BLAS thread each
+            if self._pool is None:
+                self._pool = ProcessPoolExecutor(max_workers=self._max,
+                                                 mp_context=multiprocessing.get_context("spawn"),
+                                                 initializer=_ignore_sigint)
+            submitted = {self._pool.submit(fn, job): job for job in jobs}
+        self._futures.update(submitted)
+        return set(submitted)
+
     def as_completed(self, fn, jobs):
         jobs = list(jobs)
+        self._futures = {}
+        self.restarts = 0
         if not jobs:
             return
         self._size = min(self._max, len(jobs))
-        with one_thread_per_worker():
-            self._pool = ProcessPoolExecutor(max_workers=self._size,
-                                             mp_context=multiprocessing.get_context("spawn"),
-                                             initializer=_ignore_sigint)
-            self._futures = {self._pool.submit(fn, job): job for job in jobs}
-        pending = set(self._futures)
+        pending = self._submit(fn, jobs)
         while pending:
             finished, pending = wait(pending, return_when=FIRST_COMPLETED)
+            lost = [f for f in finished if not f.cancelled()
+                    and isinstance(f.exception(), BrokenProcessPool)]
             for fut in finished:
-                yield self._futures[fut], fut
+                if fut not in lost or self.restarts >= MAX_POOL_RESTARTS:
+                    yield self._futures[fut], fut
+            if lost and self.restarts < MAX_POOL_RESTARTS:
+                # A broken pool fails every job still out: those that finished first are
+                # handed back, the others run again on a new pool.
+                rest, _ = wait(pending)
+                for fut in rest:
+                    if not fut.cancelled() and isinstance(fut.exception(), BrokenProcessPool):
+                        lost.append(fut)
+                    else:
+                        yield self._futures[fut], fut
+                self._pool.shutdown(wait=True, cancel_futures=True)
+                self._pool = None
+                self.restarts += 1
+                again = [self._futures.pop(f) for f in lost]
+                print(f"swarmloc: a worker process died; running the {len(again)} unfinished "
+                      f"jobs again on a fresh pool ({self.restarts}/{MAX_POOL_RESTARTS})",
+                      file=sys.stderr, flush=True)
+                pending = self._submit(fn, again)
 
     def stop(self) -> None:
         if self._pool is None:

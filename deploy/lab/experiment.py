@@ -651,13 +651,15 @@ def run_experiment(
     ``"dask"`` runs the jobs on the workers of the Dask scheduler at ``scheduler``
     (``tcp://HOST:8786``, or ``tls://HOST:8786`` with ``tls`` the client's certificate files),
     waiting up to ``worker_timeout_s`` for a first worker; an
-    :class:`~swarmloc.deploy.lab.executors.Executor` instance is used as it is. Whichever runs them, this process writes the rows as the jobs come back (one write
-    call per row, each (setting, seed) once). ``progress``: True shows a rich bar when stderr is
+    :class:`~swarmloc.deploy.lab.executors.Executor` instance is used as it is and left open
+    (its owner closes it: a ``LocalPool`` then keeps its processes for the next run). Whichever
+    runs them, this process writes the rows as the jobs come back (one write call per row, each
+    (setting, seed) once). ``progress``: True shows a rich bar when stderr is
     a terminal and otherwise a line every ~10 %; "bar" or "lines" force one; False shows nothing.
     ``limit``: run at most that many new jobs. A bad scheduler address or a scheduler that does
     not answer, a bad or refused TLS certificate, or no worker in time raises ConfigError before
-    the results file is touched. On KeyboardInterrupt the
-    jobs are stopped, finished rows stay in the file, and the exception propagates.
+    the results file is touched. On KeyboardInterrupt the jobs are stopped, finished rows stay in
+    the file, and the exception propagates.
     """
     jobs = plan(spec)
     path = Path(results_path)
@@ -665,7 +667,8 @@ def run_experiment(
     todo = execution_order([j for j in jobs if (j.setting, j.seed) not in done])
     if limit is not None:
         todo = todo[: max(0, limit)]
-    if isinstance(executor, str):
+    owned = isinstance(executor, str)
+    if owned:
         if executor == "local" and workers is not None and workers < 1:
             raise ConfigError(f"workers: must be >= 1, got {workers}")
         executor = make_executor(executor, workers=workers, scheduler=scheduler,
@@ -708,9 +711,8 @@ def run_experiment(
                 raise
             finally:
                 bar.close()
-            executor.close()
     finally:
-        if executor is not None:
+        if owned and executor is not None:
             executor.close()
     return written
 

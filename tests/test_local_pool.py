@@ -1,0 +1,81 @@
+"""The local pool (``deploy/lab/executors.py: LocalPool``) with real spawned processes: its worker
+processes serve every job of a run and, when the caller owns the pool, successive runs; a worker
+killed with SIGKILL mid-run leaves every row present exactly once (the jobs the broken pool lost
+run again on a fresh one).
+
+Mid-run moments are observed, not slept for: the test waits for the client's first row in the
+results file (each row is one write call) before it kills.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from grid_helpers import keys, model_columns, planned, read_rows, spec_file, stop, wait_for_rows
+
+from swarmloc.deploy.lab.executors import LocalPool
+from swarmloc.deploy.lab.experiment import load_spec, run_experiment
+
+pytestmark = pytest.mark.integration
+
+
+def _children(pid: int) -> list[int]:
+    """The pool's worker processes among ``pid``'s children (``multiprocessing.spawn``; not its
+    resource tracker)."""
+    found = []
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            ppid = int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1])
+            cmdline = (entry / "cmdline").read_bytes()
+        except (OSError, IndexError, ValueError):
+            continue
+        if ppid == pid and b"spawn_main" in cmdline:
+            found.append(int(entry.name))
+    return sorted(found)
+
+
+def test_a_pool_serves_every_job_and_successive_runs_with_the_same_processes(tmp_path):
+    spec = load_spec(spec_file(tmp_path))
+    pool = LocalPool(2)
+    try:
+        assert run_experiment(spec, tmp_path / "a.csv", progress=False, executor=pool) == 4
+        first = pool.pids()
+        assert len(first) == 2
+        assert run_experiment(spec, tmp_path / "b.csv", progress=False, executor=pool) == 4
+        assert pool.pids() == first  # the same two processes ran the second run's jobs
+    finally:
+        pool.close()
+    assert pool.pids() == []
+    for pid in first:  # the processes ended with close()
+        assert not Path(f"/proc/{pid}").exists() or "Z" in Path(f"/proc/{pid}/stat").read_text().split()[2]
+    assert model_columns(read_rows(tmp_path / "a.csv")) == model_columns(read_rows(tmp_path / "b.csv"))
+
+
+def test_worker_killed_mid_run_leaves_every_row_exactly_once(tmp_path):
+    spec_path, out = spec_file(tmp_path, replications=6, duration=1800.0), tmp_path / "out.csv"
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    proc = subprocess.Popen([sys.executable, "-m", "swarmloc.deploy.cli", "experiment",
+                             str(spec_path), "--out", str(out), "--workers", "2"],
+                            stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env=env, start_new_session=True)
+    try:
+        wait_for_rows(out, 1, proc)
+        workers = _children(proc.pid)
+        assert len(workers) == 2, workers
+        os.kill(workers[0], signal.SIGKILL)
+    finally:
+        stdout, stderr = stop(proc)
+    assert proc.returncode == 0, stderr
+    assert "a worker process died; running the" in stderr
+    assert "12 new rows" in stdout
+    assert keys(read_rows(out)) == planned(spec_path)  # every row, none twice
+    local = tmp_path / "again.csv"
+    run_experiment(load_spec(spec_path), local, workers=2, progress=False)
+    assert model_columns(read_rows(out)) == model_columns(read_rows(local))
