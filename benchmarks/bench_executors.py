@@ -10,8 +10,11 @@ Workloads (e-puck batch jobs, as ``swarmloc experiment`` runs them):
 
 Each executor runs the same spec into a fresh results file with :func:`run_experiment`:
 
-- local: ``--executor local --workers 2`` (the pool's two spawned processes start with each run,
-  as they do for every ``swarmloc experiment``);
+- local pool, fresh: ``--executor local --workers 2`` (the pool's two spawned processes start
+  with the run and import and load the kernels on their first job, as for every ``swarmloc
+  experiment`` command);
+- local pool, kept: one :class:`LocalPool` of 2 processes warmed by one small run and passed to
+  every run (what a Python script running several specs gets), the like of a running cluster;
 - dask: a scheduler and two ``dask worker --nthreads 1 --no-nanny`` processes on 127.0.0.1
   (``tests/dask_cluster.py``), started once and warmed by one small run before the timed runs, as
   a lab's cluster would be already up.
@@ -22,6 +25,8 @@ spent inside a job (start-up, scheduling, transfer, the client writing rows). Ro
 executors are checked equal (all but the timing columns). Usage::
 
     python benchmarks/bench_executors.py [--short-replications 30] [--long-replications 2]
+
+(``--long-replications 0`` skips the long workload.)
 """
 
 from __future__ import annotations
@@ -37,7 +42,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 
 from dask_cluster import LocalDaskCluster
 
-from swarmloc.deploy.lab.executors import TIMING_COLUMNS
+from swarmloc.deploy.lab.executors import TIMING_COLUMNS, LocalPool
 from swarmloc.deploy.lab.experiment import load_spec, run_experiment
 from swarmloc.deploy.warm import ensure_compiled
 
@@ -92,26 +97,33 @@ def main(argv=None) -> int:
     ensure_compiled(lambda line: print(line, file=sys.stderr))
     with tempfile.TemporaryDirectory(prefix="bench-executors-") as tmp:
         folder = Path(tmp)
-        workloads = {
-            "short (ES1, 30 s)": _spec(folder, "short", "ES1", args.short_replications, 30.0),
-            "long (ES3, 7200 s)": _spec(folder, "long", "ES3", args.long_replications, None),
-        }
+        workloads = {"short (ES1, 30 s)": _spec(folder, "short", "ES1", args.short_replications, 30.0)}
+        if args.long_replications > 0:
+            workloads["long (ES3, 7200 s)"] = _spec(folder, "long", "ES3", args.long_replications, None)
         warm = _spec(folder, "warm", "ES1", 2, 30.0)
         results = []
-        with LocalDaskCluster(workers=WORKERS) as cluster:
-            run_experiment(warm, folder / "warm.csv", progress=False, executor="dask",
-                           scheduler=cluster.address)
-            for label, spec in workloads.items():
-                local = _timed(spec, folder / f"{spec.name}-local.csv", workers=WORKERS)
-                dask = _timed(spec, folder / f"{spec.name}-dask.csv", executor="dask",
-                              scheduler=cluster.address)
-                assert _model(local["rows"]) == _model(dask["rows"]), "rows differ"
-                results += [(label, "local pool", local), (label, "dask", dask)]
-    print(f"{WORKERS} workers each; rows of both executors equal (all but {', '.join(TIMING_COLUMNS)})")
-    print(f"{'workload':20s} {'executor':10s} {'jobs':>4s} {'wall s':>7s} {'runs/s':>7s} "
+        kept = LocalPool(WORKERS)
+        try:
+            with LocalDaskCluster(workers=WORKERS) as cluster:
+                run_experiment(warm, folder / "warm.csv", progress=False, executor="dask",
+                               scheduler=cluster.address)
+                run_experiment(warm, folder / "warm-local.csv", progress=False, executor=kept)
+                for label, spec in workloads.items():
+                    fresh = _timed(spec, folder / f"{spec.name}-local.csv", workers=WORKERS)
+                    reused = _timed(spec, folder / f"{spec.name}-kept.csv", executor=kept)
+                    dask = _timed(spec, folder / f"{spec.name}-dask.csv", executor="dask",
+                                  scheduler=cluster.address)
+                    for other in (reused, dask):
+                        assert _model(fresh["rows"]) == _model(other["rows"]), "rows differ"
+                    results += [(label, "local, fresh", fresh), (label, "local, kept", reused),
+                                (label, "dask", dask)]
+        finally:
+            kept.close()
+    print(f"{WORKERS} workers each; rows of every executor equal (all but {', '.join(TIMING_COLUMNS)})")
+    print(f"{'workload':20s} {'executor':12s} {'jobs':>4s} {'wall s':>7s} {'runs/s':>7s} "
           f"{'job ms':>8s} {'overhead ms/job':>15s}")
     for label, name, r in results:
-        print(f"{label:20s} {name:10s} {r['jobs']:4d} {r['wall_s']:7.2f} {r['runs_per_s']:7.2f} "
+        print(f"{label:20s} {name:12s} {r['jobs']:4d} {r['wall_s']:7.2f} {r['runs_per_s']:7.2f} "
               f"{r['job_ms']:8.0f} {r['overhead_ms']:15.0f}")
     return 0
 

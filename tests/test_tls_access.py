@@ -353,3 +353,80 @@ def test_a_peer_linked_to_the_router_is_held_to_the_same_rules(router, tmp_path,
         assert inside.wait_for(b"marker", ARRIVE_S)
         assert not inside.wait_for(b"forged-act-4", timeout=QUIET_S)
         assert set(inside.keys()) == {keys.act(3)}
+
+
+# --------------------------------------------------------------------------------------------
+# What the router cannot check: a piece that listens
+
+
+@pytest.mark.parametrize("mode", ["client", "peer"])
+def test_a_piece_opened_from_the_client_template_listens_on_nothing(router, tmp_path, pki, mode):
+    """``client-secure.json5`` (``listen: []``, no scouting, no gossip), in client mode or even
+    in peer mode: the session listens on no endpoint, so no other piece can link to it; its one
+    link is to the router, which checks every message on it."""
+    _, endpoint = router
+    file = _client_file(tmp_path, "robot-2", pki / "ca.pem", pki / "robot-2.pem",
+                        pki / "robot-2-key.pem", mode=mode)
+    session = open_session(session_config(mode=None, connect=[endpoint], config_file=file,
+                                          admin_space=True))
+    try:
+        assert bound_endpoints(session) == []
+    finally:
+        session.close()
+
+
+@pytest.mark.parametrize("attacker_has_credentials", [True, False], ids=["own-password", "none"])
+def test_a_piece_from_the_client_template_refuses_direct_links_even_if_it_listens(
+        router, tmp_path, pki, attacker_has_credentials):
+    """Robot 2 opened from ``client-secure.json5`` but as a peer that also listens (what the
+    guide forbids), linked to the router. Robot 3 (a valid certificate; its own password, or
+    none) tries to link to robot 2 directly, around the router: robot 2 refuses the session (it
+    holds credentials to show but no dictionary to check anyone's: Zenoh closes the handshake at
+    InitSyn without credentials, at OpenSyn with them), so robot 3's ``zenoh.open`` fails."""
+    _, endpoint = router
+    victim = open_session(_listening_robot_2(tmp_path, pki, endpoint))
+    try:
+        (victim_endpoint,) = bound_endpoints(victim)
+        attacker = _config(tmp_path, pki, victim_endpoint, "robot-3", mode="peer", timeout_ms=3000)
+        attacker.insert_json5("connect/exit_on_failure", "true")
+        if not attacker_has_credentials:
+            attacker.insert_json5("transport/auth/usrpwd", "{}")
+        with pytest.raises(zenoh.ZError, match="Unable to connect"):
+            open_session(attacker).close()
+    finally:
+        victim.close()
+
+
+def test_a_piece_that_listens_without_credentials_is_a_way_around_the_router(router, tmp_path, pki):
+    """The same listening robot 2 with its user/password block removed: robot 3 links to it
+    directly, and on that link no rule applies, so its fake sense data for robot 2, which the
+    router drops (``test_security.py``), reaches robot 2. Hence the guide's rule: no piece
+    listens, and none runs without its ``transport.auth.usrpwd`` block."""
+    _, endpoint = router
+    keys = _keys()
+    config = _listening_robot_2(tmp_path, pki, endpoint)
+    config.insert_json5("transport/auth/usrpwd", "{}")
+    victim = open_session(config)
+    try:
+        (victim_endpoint,) = bound_endpoints(victim)
+        inbox = Inbox()
+        HELD.append(victim.declare_subscriber(keys.sense(2), inbox))
+        attacker = _config(tmp_path, pki, victim_endpoint, "robot-3", mode="peer")
+        attacker.insert_json5("transport/auth/usrpwd", "{}")
+        with open_session(attacker) as robot_3:
+            _probe_until_received(lambda p: robot_3.put(keys.sense(2), p), inbox)
+            robot_3.put(keys.sense(2), b"fake-sense-for-2")
+            assert inbox.wait_for(b"fake-sense-for-2")
+    finally:
+        HELD.clear()
+        victim.close()
+
+
+def _listening_robot_2(tmp_path, pki, router_endpoint) -> zenoh.Config:
+    """Robot 2's ``client-secure.json5`` in peer mode, linked to the router, also listening on
+    ``tls/127.0.0.1:0`` with its own certificate."""
+    config = _config(tmp_path, pki, router_endpoint, "robot-2", mode="peer")
+    config.insert_json5("listen/endpoints", '["tls/127.0.0.1:0"]')
+    config.insert_json5("adminspace/enabled", "true")
+    return tls.apply_tls(config, pki / "ca.pem", pki / "robot-2.pem", pki / "robot-2-key.pem",
+                         listen=True)
