@@ -13,6 +13,7 @@ import textwrap
 
 import numpy as np
 import pytest
+from grid_helpers import read_rows
 
 from swarmloc.config import ConfigError
 from swarmloc.deploy.cli import main as cli_main
@@ -33,11 +34,6 @@ def write_spec(tmp_path, text: str, name: str = "spec.toml"):
     path = tmp_path / name
     path.write_text(textwrap.dedent(text))
     return path
-
-
-def read_rows(path) -> list[dict]:
-    with open(path, newline="") as handle:
-        return list(csv.DictReader(handle))
 
 
 # ---------------------------------------------------------------------------------------------

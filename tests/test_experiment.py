@@ -8,6 +8,7 @@ import csv
 import textwrap
 
 import pytest
+from grid_helpers import read_rows
 
 from swarmloc.config import ConfigError
 from swarmloc.deploy.lab.epuck.batch import run_batch
@@ -38,11 +39,6 @@ def write_spec(tmp_path, text: str, name: str = "spec.toml"):
     path = tmp_path / name
     path.write_text(textwrap.dedent(text))
     return path
-
-
-def read_rows(path) -> list[dict]:
-    with open(path, newline="") as handle:
-        return list(csv.DictReader(handle))
 
 
 def cli(argv: list[str]) -> int:

@@ -28,6 +28,7 @@ import multiprocessing
 import os
 import re
 import signal
+import ssl
 import sys
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
@@ -289,7 +290,7 @@ class DaskExecutor:
             tls.check()
         try:
             import distributed
-            from distributed.comm.core import CommClosedError, FatalCommClosedError
+            from distributed.comm.core import CommClosedError
         except ImportError:
             raise ConfigError("--executor dask needs Dask distributed on this host and on every "
                               "worker: pip install 'swarmloc[cluster]'") from None
@@ -298,17 +299,17 @@ class DaskExecutor:
         try:
             self._client = distributed.Client(self.address, timeout=timeout_s, set_as_default=False,
                                               **({"security": tls.security()} if tls else {}))
-        except FatalCommClosedError as exc:
-            # The client's own TLS check of the scheduler's certificate failed.
-            raise ConfigError(f"--scheduler {self.address}: the scheduler's TLS certificate is "
-                              f"not signed by --tls-ca-file {tls.ca_file} or has expired "
-                              f"({exc})") from None
         except CommClosedError as exc:
             if tls is None:
                 raise ConfigError(f"--scheduler {self.address}: the scheduler closed the "
                                   f"connection ({exc}); a TLS scheduler needs tls:// and "
                                   f"--tls-ca-file/--tls-cert/--tls-key") from None
-            # The scheduler closed the connection in the handshake: it refused our certificate.
+            if isinstance(exc.__cause__, ssl.SSLCertVerificationError):
+                # This client's own check of the scheduler's certificate failed.
+                raise ConfigError(f"--scheduler {self.address}: the scheduler's TLS certificate "
+                                  f"is not signed by --tls-ca-file {tls.ca_file} or has expired "
+                                  f"({exc.__cause__})") from None
+            # The scheduler ended the handshake (an "unknown ca" alert, or a plain close).
             raise ConfigError(f"--scheduler {self.address}: the scheduler refused this client's "
                               f"certificate {tls.cert} (TLS handshake closed: {exc}); it must be "
                               f"signed by the CA the scheduler trusts (its --tls-ca-file)") from None
