@@ -8,8 +8,11 @@ the same minutes. Prints, per mode, the median and the spread (min-max) of
 
 - the world-server's lockstep ticks/s (wall clock: what a user sees, noisy on a shared machine);
 - the world-server's CPU time per tick, every thread of the world process while it ticked
-  (``results.json: transport.cpu_ms_per_tick``): what the observer costs the world itself, far
-  less sensitive to what else the machine runs,
+  (``results.json: transport.cpu_ms_per_tick``): what the observer costs the world itself, less
+  sensitive to what else the machine runs (but a crowded machine still inflates it: caches);
+- the world thread's CPU time per tick inside the observer tap's calls
+  (``transport.tap_cpu_ms_per_tick``: building frames, writing the file, offering frames to the
+  view), the work an observer adds to the lockstep's serial path, measured directly,
 
 and each observer's median as a share of the plain run's (issue 17's targets: the view within
 5 %, the recording within 10 %). The machine's load average is printed beside the figures.
@@ -79,7 +82,8 @@ def run_once(n: int, mode: str, scenario: str, duration_s: float, tmp: str, time
     if watcher:
         watcher.join(10)
     t = json.loads((Path(tmp) / run / "results.json").read_text())["transport"]
-    out = {"ticks_per_s": t["ticks_per_s"], "cpu_ms_per_tick": t["cpu_ms_per_tick"], "wall_s": t["wall_s"]}
+    out = {"ticks_per_s": t["ticks_per_s"], "cpu_ms_per_tick": t["cpu_ms_per_tick"],
+           "tap_ms_per_tick": t["tap_cpu_ms_per_tick"], "wall_s": t["wall_s"]}
     if mode == "view":
         out["frames_read"] = seen.get("frames", 0)
     if mode == "record":
@@ -93,7 +97,8 @@ def _load() -> str:
 
 
 def _spread(values: list[float]) -> str:
-    return f"{statistics.median(values):8.2f} [{min(values):.2f}-{max(values):.2f}]"
+    d = 3 if max(values) < 1 else 2
+    return f"{statistics.median(values):8.{d}f} [{min(values):.{d}f}-{max(values):.{d}f}]"
 
 
 def main() -> int:
@@ -121,14 +126,18 @@ def main() -> int:
                           flush=True)
             rate = {m: [x["ticks_per_s"] for x in v] for m, v in runs.items()}
             cpu = {m: [x["cpu_ms_per_tick"] for x in v] for m, v in runs.items()}
+            tap = {m: [x["tap_ms_per_tick"] for x in v] for m, v in runs.items()}
             base_rate, base_cpu = statistics.median(rate["plain"]), statistics.median(cpu["plain"])
+            base_tap = statistics.median(tap["plain"])
             print(f"\n{n} robots, {round(duration_s / 0.1)} ticks per run (load average now {_load()}):")
             print(f"  {'mode':6s} {'ticks/s median [min-max]':>30s} {'vs plain':>9s}   "
-                  f"{'world CPU ms/tick median [min-max]':>36s} {'vs plain':>9s}")
+                  f"{'world CPU ms/tick median [min-max]':>36s} {'vs plain':>9s}   "
+                  f"{'tap ms/tick median [min-max]':>30s} {'added/plain CPU':>15s}")
             for m in MODES:
+                added = (statistics.median(tap[m]) - base_tap) / base_cpu
                 print(f"  {m:6s} {_spread(rate[m]):>30s} {statistics.median(rate[m]) / base_rate - 1:>+9.1%}   "
-                      f"{_spread(cpu[m]):>36s} {statistics.median(cpu[m]) / base_cpu - 1:>+9.1%}",
-                      flush=True)
+                      f"{_spread(cpu[m]):>36s} {statistics.median(cpu[m]) / base_cpu - 1:>+9.1%}   "
+                      f"{_spread(tap[m]):>30s} {added:>+15.1%}", flush=True)
             print()
     return 0
 

@@ -49,6 +49,7 @@ class TickStats:
     ticks: int = 0
     started_s: float = 0.0
     cpu_started_s: float = 0.0  # process CPU time (every thread, Zenoh's too) when ticking began
+    tap_cpu_s: float = 0.0  # the world thread's CPU time inside the observer tap's calls
     tick_durations_s: list = field(default_factory=list)
     late_acts: int = 0  # live robots whose act missed its tick (deadline or lockstep timeout)
     stale_acts: int = 0  # acts that arrived after their tick was closed
@@ -70,6 +71,7 @@ class TickStats:
             # than wall-clock rates (benchmarks/bench_observers.py compares it per tick).
             "cpu_s": round(cpu, 3),
             "cpu_ms_per_tick": round(cpu / self.ticks * 1e3, 4) if self.ticks else None,
+            "tap_cpu_ms_per_tick": round(self.tap_cpu_s / self.ticks * 1e3, 4) if self.ticks else None,
             "late_acts": self.late_acts,
             "stale_acts": self.stale_acts,
             "overruns": self.overruns,
@@ -287,7 +289,9 @@ class WorldServer:
             for robot, sense in senses:
                 self._sense_pub[robot].put(sense)
             if self.tap is not None:
+                c0 = time.thread_time()
                 self.tap.sensed(senses)
+                self.stats.tap_cpu_s += time.thread_time() - c0
             started = time.monotonic()
             self._collect(started)
             with self._cond:
@@ -297,7 +301,9 @@ class WorldServer:
                 self._acts = [None] * n
             world.step(acts)
             if self.tap is not None:
+                c0 = time.thread_time()
                 self.tap.stepped(acts)
+                self.stats.tap_cpu_s += time.thread_time() - c0
             self.stats.ticks += 1
             self.stats.tick_durations_s.append(time.perf_counter() - t0)
             if world.tick % self.state_every_ticks == 0 or world.done:
