@@ -288,12 +288,16 @@ def test_corrupt_recording_is_named(small_recording, tmp_path, mangle, expect):
 class Page:
     """Headless chromium on one page of the view."""
 
-    def __init__(self, url: str):
+    def __init__(self, url: str | None = None):
         from playwright.sync_api import sync_playwright
 
         self._pw = sync_playwright().start()
         self.browser = self._pw.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
         self.page = self.browser.new_page(viewport={"width": 1300, "height": 760})
+        if url is not None:
+            self.open(url)
+
+    def open(self, url: str) -> None:
         self.page.goto(url)
 
     def tick(self) -> int:
@@ -396,15 +400,16 @@ def test_live_page_and_replay_page_show_the_robots(tmp_path, family):
     path = _write(tmp_path, scenario)
     mcap = tmp_path / "run.mcap"
     run = "view" + uuid.uuid4().hex[:8]
-    page = None
+    # The browser starts first: on a crowded machine its start took longer than a short run.
+    page = Page()
     with supervised() as sup:
-        swarm = start_swarm(sup, path, run=run, robots=scenario.robots, out=tmp_path / "out",
-                            log_dir=tmp_path, join_timeout_s=90, realtime=not lockstep,
-                            world_args=("--record", str(mcap), *world_flags))
-        _view, url = start_view(sup, swarm.router_endpoint, run, "127.0.0.1:0", tmp_path / "view.log")
-        assert url.startswith("http://127.0.0.1:")
         try:
-            page = Page(url)
+            swarm = start_swarm(sup, path, run=run, robots=scenario.robots, out=tmp_path / "out",
+                                log_dir=tmp_path, join_timeout_s=90, realtime=not lockstep,
+                                world_args=("--record", str(mcap), *world_flags))
+            _view, url = start_view(sup, swarm.router_endpoint, run, "127.0.0.1:0", tmp_path / "view.log")
+            assert url.startswith("http://127.0.0.1:")
+            page.open(url)
             page.wait_tick("t > 0", 120)
             first = page.tick()
             page.wait_tick(f"t > {first}", 60)  # the counter advances

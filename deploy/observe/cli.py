@@ -200,6 +200,8 @@ def main_view(args) -> int:
 # -- swarmloc record ---------------------------------------------------------------------------
 
 def main_record(args) -> int:
+    import msgpack
+
     from swarmloc.deploy.observe.record import RecordingWriter
     from swarmloc.deploy.observe.tap import frame_key
     from swarmloc.protocol.keys import Keys
@@ -218,7 +220,7 @@ def main_record(args) -> int:
 
         def on_frame(sample):
             try:
-                frame = json.loads(sample.payload.to_bytes())
+                frame = msgpack.unpackb(sample.payload.to_bytes(), strict_map_key=False)
                 frame.pop("done", None)
                 with lock:
                     if frame["tick"] > state["last"] and not writer._file.closed:
@@ -247,6 +249,7 @@ def main_record(args) -> int:
 # -- swarmloc replay ---------------------------------------------------------------------------
 
 def main_replay(args) -> int:
+    import msgpack
     import zenoh
 
     from swarmloc.deploy.observe.record import RecordingError, dumps, read_recording
@@ -284,6 +287,7 @@ def main_replay(args) -> int:
               flush=True)
         tick_s = scene.get("tick_s") or 0.1
         period = 1.0 / FRAME_HZ
+        pack = msgpack.Packer().pack
         start = time.monotonic()
         first_tick = recording.frames[0]["tick"] if recording.frames else 0
         next_frame_at = 0.0
@@ -302,10 +306,10 @@ def main_replay(args) -> int:
             now = time.monotonic()
             if now >= next_frame_at:
                 next_frame_at = now + period
-                frame_pub.put(dumps(frame))
+                frame_pub.put(pack(frame))
             last = frame
         if last is not None:
-            frame_pub.put(dumps({**last, "done": True}))
+            frame_pub.put(pack({**last, "done": True}))
             end_pub.put(encode(RunEnd(tick=last["tick"], reason="replayed", metrics={})))
         for d in (state_pub, frame_pub, end_pub, queryable, token):
             d.undeclare()
