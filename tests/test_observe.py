@@ -501,3 +501,26 @@ def test_replay_republishes_a_recording_as_if_live(small_recording, tmp_path):
     assert [s.tick for s in states] == [f["tick"] for f in rec.frames]
     assert [[list(p) for p in s.poses] for s in states] == [f["state"]["poses"] for f in rec.frames]
     assert status.returncode == 1  # the replay's world token left with it
+
+
+def test_standalone_recorder_keeps_the_frames_it_receives(tmp_path):
+    """`swarmloc record --run RUN`: the world's bounded frame stream (msgpack) to a recording
+    whose frames are the world's own for their ticks, in order, ending at the run's end."""
+    scenario = load_any("ES1", {"robots": 3, "duration_s": 12.0, "seed": 5}, [])
+    path = _write(tmp_path, scenario)
+    run = "sr" + uuid.uuid4().hex[:8]
+    mcap, received = tmp_path / "world.mcap", tmp_path / "received.mcap"
+    with supervised() as sup:
+        swarm = start_swarm(sup, path, run=run, robots=3, out=tmp_path / "out", log_dir=tmp_path,
+                            join_timeout_s=90, realtime=True, world_args=("--record", str(mcap)))
+        recorder = sup.start(["record", str(received), "--run", run, "-e", swarm.router_endpoint],
+                             stdout=subprocess.PIPE)
+        assert json.loads(recorder.stdout.readline())["run"] == run  # subscribed: readiness
+        assert swarm.world.wait(timeout=120) == 0, (tmp_path / "world.log").read_text()[-2000:]
+        assert recorder.wait(timeout=60) == 0, "the recorder stops at the run's end"
+    world = {f["tick"]: f for f in read_recording(mcap).frames}
+    rec = read_recording(received)
+    ticks = [f["tick"] for f in rec.frames]
+    assert rec.truncated is None and len(ticks) > 20 and ticks == sorted(set(ticks))
+    assert ticks[-1] == max(world), "the last tick, sent when the run ends"
+    assert all(f["state"]["poses"] == world[f["tick"]]["state"]["poses"] for f in rec.frames)
