@@ -181,7 +181,8 @@ def main_world(args) -> int:
                              realtime=args.realtime, act_timeout_s=args.act_timeout_s,
                              join_timeout_s=args.join_timeout_s,
                              checkpoint=write_results if out else None,
-                             checkpoint_every_s=args.checkpoint_s, tap=tap)
+                             checkpoint_every_s=args.checkpoint_s, tap=tap,
+                             samples=args.particles)
         server.declare()
         if args.announce:
             print(json.dumps({"endpoints": bound_endpoints(session)}), flush=True)
@@ -254,7 +255,7 @@ def main_run(args) -> int:
     return run_local(scenario, run_name=args.run, out_root=Path(args.out), realtime=args.realtime,
                      quiet=args.quiet, join_timeout_s=args.join_timeout_s, null_brains=args.null_brains,
                      view=args.view, view_http=args.view_http, record=args.record,
-                     record_messages=args.record_messages)
+                     record_messages=args.record_messages, particles=args.particles)
 
 
 #: Verbs that became experiment specs (issue 16): what to run instead.

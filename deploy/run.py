@@ -134,7 +134,7 @@ def print_metrics(summary: dict) -> None:
 def run_local(scenario: AnyScenario, *, run_name: str | None, out_root: Path, realtime: bool,
               quiet: bool, join_timeout_s: float = 180.0, null_brains: bool = False,
               view: bool = False, view_http: str = "127.0.0.1:8765", record: str | None = None,
-              record_messages: bool = False) -> int:
+              record_messages: bool = False, particles: int = 0) -> int:
     run = run_name or f"{scenario.name}-{scenario.label}-s{scenario.seed}-{secrets.token_hex(3)}".replace(".", "_")
     out = out_root / run
     out.mkdir(parents=True, exist_ok=True)
@@ -163,7 +163,7 @@ def run_local(scenario: AnyScenario, *, run_name: str | None, out_root: Path, re
         swarm = start_swarm(sup, scenario_file, run=run, robots=scenario.robots, out=out,
                             log_dir=log_dir, realtime=realtime, join_timeout_s=join_timeout_s,
                             agent_args=("--null-brain",) if null_brains else (),
-                            world_args=record_world_args(record, record_messages))
+                            world_args=record_world_args(record, record_messages, particles))
         if view:  # an observer like any other, on the standalone router
             _, url = start_view(sup, swarm.router_endpoint, run, view_http, log_dir / "view.log")
             print(f"view: {url}", file=sys.stderr, flush=True)

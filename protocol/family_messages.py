@@ -118,6 +118,10 @@ class EstimateAct:
     pose_estimate: tuple[float, float, float]  #: (x_m, y_m, theta_rad), finite
     payload: bytes | None  #: broadcast to teammates (<= MAX_RADIO_PAYLOAD_BYTES), None for silence
     command: tuple[float, ...]  #: family-specific motion command, at most 8 finite values
+    #: poses (x_m, y_m, theta_rad) of the belief's population (particles, GA individuals),
+    #: subsampled, at most Welcome.samples <= MAX_SAMPLES; logged for observers only (the world
+    #: draws and records them, never uses them), empty unless the world asked
+    samples: tuple[tuple[float, float, float], ...] = ()
 
 
 @dataclass(frozen=True, slots=True)

@@ -81,6 +81,9 @@ MAX_BEAMS = 1024
 #: A vision robot's camera frame (208x160 JPEG: a few KB; PNG: up to about 100 KB).
 MAX_IMAGE_BYTES = 192 * 1024
 MAX_TEAMMATES = 64
+#: Poses of a belief's population (particles, GA individuals) one Act may log for observers, when
+#: the world asks (Welcome.samples): 256 poses are about 7 KB of msgpack.
+MAX_SAMPLES = 256
 MAX_POSES = 100_000
 MAX_STRING_CHARS = 256
 MAX_DICT_DEPTH = 8
@@ -158,6 +161,9 @@ class Welcome:
     run: str  #: run name, ``[A-Za-z0-9_-]{1,64}``
     seed: int  #: run seed, 0..2**64-1; the agent derives its own generator from it and its id
     scenario: dict  #: plain nested dict of str/int/float/bool/None/list/dict, depth <= 8
+    #: observers' request: log up to this many poses of the belief's population in each Act
+    #: (EstimateAct.samples), 0..MAX_SAMPLES; 0, the default, asks for none
+    samples: int = 0
 
 
 @dataclass(frozen=True, slots=True)
@@ -541,6 +547,7 @@ _FIELD_SPECS: dict[type, tuple[str, dict[str, _Spec]]] = {
         "run": _Str(pattern=NAME_PATTERN),
         "seed": _Int(0, 2**64 - 1),
         "scenario": _PlainDict(),
+        "samples": _Int(0, MAX_SAMPLES),
     }),
     RabMessage: ("rab", {
         "sender_id": _ROBOT_ID,
@@ -608,6 +615,7 @@ _FIELD_SPECS: dict[type, tuple[str, dict[str, _Spec]]] = {
         "pose_estimate": _FloatTuple(3),
         "payload": _Bytes(MAX_RADIO_PAYLOAD_BYTES, optional=True),
         "command": _Tuple(_FINITE, 8),
+        "samples": _Tuple(_FloatTuple(3), MAX_SAMPLES),
     }),
     VisionSense: ("vision_sense", {
         "tick": _TICK,

@@ -24,9 +24,12 @@ import pytest
 from swarmloc.deploy.launch import supervised
 from swarmloc.deploy.observe.cli import start_view
 from swarmloc.deploy.observe.record import (
+    ESTIMATES_TOPIC,
     FOXGLOVE_TOPIC,
     FRAME_TOPIC,
+    SAMPLES_TOPIC,
     SCENE_TOPIC,
+    TF_TOPIC,
     RecordingError,
     read_recording,
 )
@@ -49,6 +52,17 @@ needs_browser = pytest.mark.skipif(
 CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
                  "--disable-component-update", "--disable-sync", "--no-first-run"]
 ROBOT_RGB = np.array([214, 39, 40])  # view.js: TRUE
+SAMPLE_RGB = np.array([23, 190, 207])  # view.js: SAMPLE
+#: sha256 of each Foxglove schema as ``@foxglove/schemas`` 2.1.0 (npm) exports it in
+#: ``dist/jsonschema`` (json.dumps with sort_keys and no spaces), taken from that package: a
+#: recording must declare Foxglove's own schema text, not a shape swarmloc wrote.
+FOXGLOVE_SCHEMA_SHA256 = {
+    "foxglove.SceneUpdate": "441ff6e3d0e6413eb0bb5cc1bedab904a3289c4f30c0263d1f2120cb45fa2adb",
+    "foxglove.FrameTransforms": "abfec5a42f4a9eb2f7c7e5da9bb15f76d09781dd1e6e0d4be936521059714400",
+    "foxglove.PosesInFrame": "2284dddb0d276c039e378ed21d77e71af68b32c3317aeee791c9265cc3e0e492",
+}
+FOXGLOVE_TOPICS = {FOXGLOVE_TOPIC: "foxglove.SceneUpdate", TF_TOPIC: "foxglove.FrameTransforms",
+                   ESTIMATES_TOPIC: "foxglove.PosesInFrame", SAMPLES_TOPIC: "foxglove.PosesInFrame"}
 
 
 def _write(tmp_path, scenario) -> Path:
@@ -84,11 +98,10 @@ def test_lockstep_recording_has_every_tick_bit_for_bit(tmp_path):
         [a.wait(timeout=30) for a in swarm.agents]
     rec = read_recording(mcap, keep_messages=True)
     assert rec.truncated is None
-    assert rec.encodings == {SCENE_TOPIC: "json", FRAME_TOPIC: "msgpack", FOXGLOVE_TOPIC: "json",
+    assert rec.encodings == {SCENE_TOPIC: "json", FRAME_TOPIC: "msgpack", **dict.fromkeys(FOXGLOVE_TOPICS, "json"),
                              "/swarmloc/sense": "swarmloc-msgpack", "/swarmloc/act": "swarmloc-msgpack"}
-    assert rec.schemas == {SCENE_TOPIC: "swarmloc.Scene", FRAME_TOPIC: "swarmloc.Frame",
-                           FOXGLOVE_TOPIC: "foxglove.SceneUpdate", "/swarmloc/sense": "",
-                           "/swarmloc/act": ""}
+    assert rec.schemas == {SCENE_TOPIC: "swarmloc.Scene", FRAME_TOPIC: "swarmloc.Frame", **FOXGLOVE_TOPICS,
+                           "/swarmloc/sense": "", "/swarmloc/act": ""}
     ticks = [f["tick"] for f in rec.frames]
     assert ticks == list(range(401)), "every tick, in order, from 0 to the last"
     batch = _batch_poses(scenario)
@@ -110,7 +123,124 @@ def test_lockstep_recording_has_every_tick_bit_for_bit(tmp_path):
     names = {s.name: (s.encoding, json.loads(s.data)["title"]) for s in summary.schemas.values()}
     assert names == {"swarmloc.Scene": ("jsonschema", "swarmloc.Scene"),
                      "swarmloc.Frame": ("jsonschema", "swarmloc.Frame"),
-                     "foxglove.SceneUpdate": ("jsonschema", "foxglove.SceneUpdate")}
+                     **{name: ("jsonschema", name) for name in FOXGLOVE_SCHEMA_SHA256}}
+    # Foxglove's channels: Foxglove's schema text, every message valid against it, every 0.5 s
+    for path, frames in ((mcap, rec.frames), (tmp_path / "batch.mcap", brec.frames)):
+        by_tick = {f["tick"]: f for f in frames}
+        messages = _foxglove_messages(path, scenario.world.tick_s)
+        assert {t: len(m) for t, m in messages.items()} == {FOXGLOVE_TOPIC: 1 + 81, TF_TOPIC: 81,
+                                                            ESTIMATES_TOPIC: 81}
+        for tick, tf in messages[TF_TOPIC]:  # world -> robot_i at the true pose of that tick
+            truth = by_tick[tick]["truth"]
+            assert [t["child_frame_id"] for t in tf["transforms"]] == [f"robot_{i}" for i in range(4)]
+            for t, pose in zip(tf["transforms"], truth):
+                assert t["parent_frame_id"] == "world"
+                _assert_pose_near(t["translation"], t["rotation"], pose)
+        for tick, poses in messages[ESTIMATES_TOPIC]:  # each robot's own pose belief
+            known = [e for e in by_tick[tick]["estimates"] if e is not None]  # none before the first Act
+            assert len(known) == (4 if tick else 0) and poses["frame_id"] == "world"
+            assert len(poses["poses"]) == len(known)
+            for p, e in zip(poses["poses"], known):
+                _assert_pose_near(p["position"], p["orientation"], e)
+
+
+def _foxglove_messages(path, tick_s: float) -> dict[str, list[tuple[int, dict]]]:
+    """Every message of a recording's Foxglove channels as (tick, JSON), each validated against
+    the schema text the file declares, which must be Foxglove's own (FOXGLOVE_SCHEMA_SHA256)."""
+    import hashlib
+
+    import jsonschema
+    from mcap.reader import make_reader
+
+    out: dict[str, list] = {}
+    validators: dict[int, jsonschema.Draft202012Validator] = {}
+    with open(path, "rb") as f:
+        tick_ns = round(tick_s * 1e9)
+        for schema, channel, message in make_reader(f).iter_messages():
+            if not channel.topic.startswith("/foxglove/"):
+                continue
+            if schema.id not in validators:
+                text = json.loads(schema.data)
+                digest = hashlib.sha256(json.dumps(text, sort_keys=True, separators=(",", ":")).encode())
+                assert digest.hexdigest() == FOXGLOVE_SCHEMA_SHA256[schema.name], \
+                    f"{schema.name}: not Foxglove's schema text"
+                assert FOXGLOVE_TOPICS[channel.topic] == schema.name
+                validators[schema.id] = jsonschema.Draft202012Validator(text)
+            assert channel.message_encoding == "json"
+            value = json.loads(message.data)
+            validators[schema.id].validate(value)
+            out.setdefault(channel.topic, []).append((message.log_time // tick_ns, value))
+    return out
+
+
+def _assert_pose_near(position: dict, orientation: dict, pose) -> None:
+    """A Foxglove position and quaternion against (x, y, theta): four decimals are written."""
+    assert abs(position["x"] - pose[0]) <= 6e-5 and abs(position["y"] - pose[1]) <= 6e-5
+    yaw = 2 * np.arctan2(orientation["z"], orientation["w"])
+    assert abs((yaw - pose[2] + np.pi) % (2 * np.pi) - np.pi) <= 1e-4
+    assert orientation["x"] == orientation["y"] == 0
+
+
+def test_foxglove_schemas_reject_what_foxglove_would_not_read():
+    """The schema check can fail: Foxglove's FrameTransforms and PosesInFrame refuse a transform
+    without its rotation, a pose without its orientation, a timestamp with negative seconds."""
+    import jsonschema
+
+    from swarmloc.deploy.observe.record import FOXGLOVE_SCHEMAS, foxglove_poses, foxglove_transforms
+
+    frame = {"truth": [[1.0, 2.0, 0.5], None], "estimates": [[1.1, 2.1, 0.4], None]}
+    tf = json.loads(foxglove_transforms(frame, 1_500_000_000))
+    poses = json.loads(foxglove_poses(frame["estimates"], 1_500_000_000))
+    jsonschema.validate(tf, FOXGLOVE_SCHEMAS["foxglove.FrameTransforms"])
+    jsonschema.validate(poses, FOXGLOVE_SCHEMAS["foxglove.PosesInFrame"])
+    assert tf["transforms"][0]["timestamp"] == {"sec": 1, "nsec": 500_000_000}
+    assert len(tf["transforms"]) == 1 and len(poses["poses"]) == 1, "unknown poses left out"
+    del tf["transforms"][0]["rotation"]
+    del poses["poses"][0]["orientation"]
+    for bad, name in ((tf, "foxglove.FrameTransforms"), (poses, "foxglove.PosesInFrame"),
+                      ({**poses, "timestamp": {"sec": -1, "nsec": 0}}, "foxglove.PosesInFrame")):
+        with pytest.raises(jsonschema.ValidationError):
+            jsonschema.validate(bad, FOXGLOVE_SCHEMAS[name])
+
+
+# -- populations on request ------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("algorithm", ["cfsga", "ssga", "simple_ga", "amcl"])
+def test_laser_agents_log_their_population_only_when_asked_and_unchanged_by_it(algorithm):
+    """Welcome.samples = N: each Act carries at most N finite poses of the robot's population,
+    inside the map; 0: none. Asking changes nothing else: the Acts are equal but for samples."""
+    import dataclasses
+
+    from swarmloc.agents.brains import brain_from_welcome
+    from swarmloc.protocol.errors import ErrorCounter
+    from swarmloc.protocol.messages import MAX_SAMPLES, EstimateAct, Welcome, decode, encode
+    from swarmloc.world.service import served_world
+
+    scenario = load_any("laser-collab-three-rooms", {"seed": 4, "algorithm": algorithm}, ["world.steps=4"])
+    asked = 40
+    world = served_world(scenario)
+    x0, y0, x1, y1 = world.world.map.bounds_m
+    brains = {n: [brain_from_welcome(Welcome(robot_id=r, run="unit", seed=scenario.seed,
+                                             scenario=scenario.to_dict(), samples=n))
+                  for r in range(scenario.robots)] for n in (0, asked)}
+    while not world.done:
+        acts = []
+        for r, data in world.senses():
+            plain, watched = (b[r].act(decode(data, b[r].sense_type), ErrorCounter()) for b in brains.values())
+            assert plain.samples == ()
+            assert 0 < len(watched.samples) <= asked
+            assert all(x0 - 1 <= p[0] <= x1 + 1 and y0 - 1 <= p[1] <= y1 + 1 for p in watched.samples)
+            assert dataclasses.replace(watched, samples=()) == plain, "watching changes nothing"
+            assert decode(encode(watched), EstimateAct) == watched
+            acts.append(plain)
+        world.step(acts)
+    # the bound is the protocol's: more than MAX_SAMPLES poses do not encode, --particles says so
+    with pytest.raises(ValueError, match="samples"):
+        encode(dataclasses.replace(watched, samples=((0.0, 0.0, 0.0),) * (MAX_SAMPLES + 1)))
+    proc = subprocess.run(["swarmloc", "run", "laser-collab-three-rooms", "--particles", "999"],
+                          capture_output=True, text=True, timeout=60, check=False)
+    assert proc.returncode == 2 and f"within 0..{MAX_SAMPLES}" in proc.stderr
 
 
 # -- bad recordings --------------------------------------------------------------------------
@@ -158,12 +288,16 @@ def test_corrupt_recording_is_named(small_recording, tmp_path, mangle, expect):
 class Page:
     """Headless chromium on one page of the view."""
 
-    def __init__(self, url: str):
+    def __init__(self, url: str | None = None):
         from playwright.sync_api import sync_playwright
 
         self._pw = sync_playwright().start()
         self.browser = self._pw.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
         self.page = self.browser.new_page(viewport={"width": 1300, "height": 760})
+        if url is not None:
+            self.open(url)
+
+    def open(self, url: str) -> None:
         self.page.goto(url)
 
     def tick(self) -> int:
@@ -178,11 +312,19 @@ class Page:
     def shown(self) -> dict:
         return self.page.evaluate("window.swarmloc.frame")
 
-    def pixels_at(self, poses) -> list[np.ndarray]:
+    def to_pixels(self, points) -> list[list[float]]:
+        """The page's own world-to-pixel transform of (x, y, ...) points."""
+        return self.page.evaluate("(ps) => ps.map((p) => window.swarmloc.toPixel(p[0], p[1]))",
+                                  [list(p[:2]) for p in points])
+
+    def image(self) -> np.ndarray:
         from PIL import Image
 
-        points = [self.page.evaluate(f"window.swarmloc.toPixel({p[0]}, {p[1]})") for p in poses]
-        image = np.asarray(Image.open(io.BytesIO(self.page.locator("#arena").screenshot())).convert("RGB"))
+        return np.asarray(Image.open(io.BytesIO(self.page.locator("#arena").screenshot())).convert("RGB"))
+
+    def pixels_at(self, poses) -> list[np.ndarray]:
+        points = self.to_pixels(poses)
+        image = self.image()
         return [image[round(y), round(x)].astype(int) for x, y in points]
 
     def close(self) -> None:
@@ -203,6 +345,31 @@ def _robots_drawn_at(page: Page, poses, alive) -> None:
     assert np.abs(page.pixels_at([far])[0] - ROBOT_RGB).max() > 60
 
 
+def _samples_drawn_at(page: Page, frame: dict, per_robot: int) -> None:
+    """Every robot's population is drawn where its poses are (a cyan square each), and goes when
+    the page's particles box is unticked. The robots, their estimates and the lines joining them
+    are drawn over the particles: only particles away from them are looked at."""
+    assert len(frame["samples"]) == len(frame["truth"])
+    assert all(0 < len(own) <= per_robot for own in frame["samples"]), "at most what was asked"
+    samples = [p for own in frame["samples"] for p in own]
+    radius_px = page.page.evaluate(
+        "Math.max(window.swarmloc.scene.robot_radius_m * window.swarmloc.transform.s, 5)")
+    drawn_over = np.array(page.to_pixels([p for p in frame["truth"] + frame["estimates"] if p]))
+    free = [xy for xy in page.to_pixels(samples)
+            if np.hypot(*(drawn_over - xy).T).min() > 1.5 * radius_px + 3]
+    assert len(free) >= 5, "particles to look at, away from the robots"
+
+    def cyan(image) -> np.ndarray:
+        return np.array([np.abs(image[round(y), round(x)].astype(int) - SAMPLE_RGB).max() <= 40
+                         for x, y in free])
+
+    shown = cyan(page.image())
+    assert shown.mean() >= 0.9, f"particles drawn at {shown.sum()} of {len(free)} of their poses"
+    page.page.uncheck("#samples")
+    assert cyan(page.image()).mean() <= 0.05, "unticked: no particles drawn"
+    page.page.check("#samples")
+
+
 def _synthetic_replay(tmp_path):
     from swarmloc.world.replay.mrclam import SyntheticConfig, synthesize, write_dataset
 
@@ -212,39 +379,47 @@ def _synthetic_replay(tmp_path):
                     [f"dataset={json.dumps(str(folder))}", "duration_s=12.0", "calibration_s=0.0"])
 
 
+PARTICLES = 48
 FAMILIES = {
-    # name: (scenario builder, lockstep?) -- in lockstep these short runs end before a page has
-    # loaded, so they run in real time (the recording test covers lockstep).
-    "foraging": (lambda tmp: load_any("ES1", {"robots": 4, "duration_s": 25.0, "seed": 3}, []), False),
-    "laser": (lambda tmp: load_any("laser-collab-three-rooms", {"seed": 1}, ["world.steps=40"]), False),
-    "vision": (lambda tmp: load_any("vision-exp2", {"seed": 2}, []), False),
-    "replay": (_synthetic_replay, False),
+    # name: (scenario builder, lockstep?, the world's extra flags) -- in lockstep these short runs
+    # end before a page has loaded, so they run in real time (the recording test covers lockstep).
+    # The laser robots are asked for their populations (--particles): the page draws them.
+    "foraging": (lambda tmp: load_any("ES1", {"robots": 4, "duration_s": 25.0, "seed": 3}, []), False, ()),
+    "laser": (lambda tmp: load_any("laser-collab-three-rooms", {"seed": 1}, ["world.steps=60"]), False,
+              ("--particles", str(PARTICLES))),
+    "vision": (lambda tmp: load_any("vision-exp2", {"seed": 2}, []), False, ()),
+    "replay": (_synthetic_replay, False, ()),
 }
 
 
 @needs_browser
 @pytest.mark.parametrize("family", list(FAMILIES))
 def test_live_page_and_replay_page_show_the_robots(tmp_path, family):
-    build, lockstep = FAMILIES[family]
+    build, lockstep, world_flags = FAMILIES[family]
     scenario = build(tmp_path)
     path = _write(tmp_path, scenario)
     mcap = tmp_path / "run.mcap"
     run = "view" + uuid.uuid4().hex[:8]
-    page = None
+    # The browser starts first: on a crowded machine its start took longer than a short run.
+    page = Page()
     with supervised() as sup:
-        swarm = start_swarm(sup, path, run=run, robots=scenario.robots, out=tmp_path / "out",
-                            log_dir=tmp_path, join_timeout_s=90, realtime=not lockstep,
-                            world_args=("--record", str(mcap)))
-        _view, url = start_view(sup, swarm.router_endpoint, run, "127.0.0.1:0", tmp_path / "view.log")
-        assert url.startswith("http://127.0.0.1:")
         try:
-            page = Page(url)
+            swarm = start_swarm(sup, path, run=run, robots=scenario.robots, out=tmp_path / "out",
+                                log_dir=tmp_path, join_timeout_s=90, realtime=not lockstep,
+                                world_args=("--record", str(mcap), *world_flags))
+            _view, url = start_view(sup, swarm.router_endpoint, run, "127.0.0.1:0", tmp_path / "view.log")
+            assert url.startswith("http://127.0.0.1:")
+            page.open(url)
             page.wait_tick("t > 0", 120)
             first = page.tick()
             page.wait_tick(f"t > {first}", 60)  # the counter advances
             page.page.click("#pause")  # the page keeps what it shows; the run goes on
             shown = page.shown()
             _robots_drawn_at(page, shown["truth"], shown["state"]["alive"])
+            if world_flags:
+                _samples_drawn_at(page, shown, PARTICLES)
+            else:
+                assert "samples" not in shown, "populations only on request"
             page.page.evaluate("window.swarmloc.socket.send('garbage {')")  # counted, ignored
             page.page.evaluate("window.swarmloc.socket.send(JSON.stringify({cmd: 'seek', tick: 'x'}))")
             page.close()
@@ -262,6 +437,10 @@ def test_live_page_and_replay_page_show_the_robots(tmp_path, family):
     assert sorted(by_tick) == list(range(len(rec.frames)))
     assert by_tick[shown["tick"]]["state"]["poses"] == shown["state"]["poses"], \
         "the page showed the world's state of its tick"
+    if world_flags:  # the populations are recorded, and Foxglove gets them (its own schema)
+        assert by_tick[shown["tick"]]["samples"] == shown["samples"]
+        clouds = _foxglove_messages(mcap, rec.scene["tick_s"])[SAMPLES_TOPIC]
+        assert clouds and all(len(c["poses"]) == sum(map(len, by_tick[t]["samples"])) for t, c in clouds)
     # the replay page: seek to a tick and show its poses
     target = len(rec.frames) * 2 // 3
     with supervised() as sup:
@@ -275,6 +454,8 @@ def test_live_page_and_replay_page_show_the_robots(tmp_path, family):
             frame = by_tick[target]
             assert page.shown()["state"]["poses"] == frame["state"]["poses"]
             _robots_drawn_at(page, frame["truth"], frame["state"]["alive"])
+            if world_flags:
+                _samples_drawn_at(page, frame, PARTICLES)
             if family == "foraging":
                 os.makedirs(tmp_path / "shots", exist_ok=True)
             shot = os.environ.get("SWARMLOC_SCREENSHOTS")
@@ -320,3 +501,26 @@ def test_replay_republishes_a_recording_as_if_live(small_recording, tmp_path):
     assert [s.tick for s in states] == [f["tick"] for f in rec.frames]
     assert [[list(p) for p in s.poses] for s in states] == [f["state"]["poses"] for f in rec.frames]
     assert status.returncode == 1  # the replay's world token left with it
+
+
+def test_standalone_recorder_keeps_the_frames_it_receives(tmp_path):
+    """`swarmloc record --run RUN`: the world's bounded frame stream (msgpack) to a recording
+    whose frames are the world's own for their ticks, in order, ending at the run's end."""
+    scenario = load_any("ES1", {"robots": 3, "duration_s": 12.0, "seed": 5}, [])
+    path = _write(tmp_path, scenario)
+    run = "sr" + uuid.uuid4().hex[:8]
+    mcap, received = tmp_path / "world.mcap", tmp_path / "received.mcap"
+    with supervised() as sup:
+        swarm = start_swarm(sup, path, run=run, robots=3, out=tmp_path / "out", log_dir=tmp_path,
+                            join_timeout_s=90, realtime=True, world_args=("--record", str(mcap)))
+        recorder = sup.start(["record", str(received), "--run", run, "-e", swarm.router_endpoint],
+                             stdout=subprocess.PIPE)
+        assert json.loads(recorder.stdout.readline())["run"] == run  # subscribed: readiness
+        assert swarm.world.wait(timeout=120) == 0, (tmp_path / "world.log").read_text()[-2000:]
+        assert recorder.wait(timeout=60) == 0, "the recorder stops at the run's end"
+    world = {f["tick"]: f for f in read_recording(mcap).frames}
+    rec = read_recording(received)
+    ticks = [f["tick"] for f in rec.frames]
+    assert rec.truncated is None and len(ticks) > 20 and ticks == sorted(set(ticks))
+    assert ticks[-1] == max(world), "the last tick, sent when the run ends"
+    assert all(f["state"]["poses"] == world[f["tick"]]["state"]["poses"] for f in rec.frames)

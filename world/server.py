@@ -48,6 +48,8 @@ log = logging.getLogger("swarmloc.world")
 class TickStats:
     ticks: int = 0
     started_s: float = 0.0
+    cpu_started_s: float = 0.0  # process CPU time (every thread, Zenoh's too) when ticking began
+    tap_cpu_s: float = 0.0  # the world thread's CPU time inside the observer tap's calls
     tick_durations_s: list = field(default_factory=list)
     late_acts: int = 0  # live robots whose act missed its tick (deadline or lockstep timeout)
     stale_acts: int = 0  # acts that arrived after their tick was closed
@@ -56,6 +58,7 @@ class TickStats:
     def summary(self) -> dict:
         d = np.array(self.tick_durations_s) if self.tick_durations_s else np.zeros(1)
         wall = time.perf_counter() - self.started_s if self.started_s else 0.0
+        cpu = time.process_time() - self.cpu_started_s if self.started_s else 0.0
         return {
             "ticks": self.ticks,
             "wall_s": round(wall, 3),
@@ -64,6 +67,11 @@ class TickStats:
             "tick_ms_p99": round(float(np.percentile(d, 99)) * 1e3, 3),
             "tick_ms_max": round(float(d.max()) * 1e3, 3),
             "tick_ms_sum": round(float(d.sum()) * 1e3, 1),
+            # The world process's CPU time while ticking: far less noisy on a shared machine
+            # than wall-clock rates (benchmarks/bench_observers.py compares it per tick).
+            "cpu_s": round(cpu, 3),
+            "cpu_ms_per_tick": round(cpu / self.ticks * 1e3, 4) if self.ticks else None,
+            "tap_cpu_ms_per_tick": round(self.tap_cpu_s / self.ticks * 1e3, 4) if self.ticks else None,
             "late_acts": self.late_acts,
             "stale_acts": self.stale_acts,
             "overruns": self.overruns,
@@ -87,6 +95,7 @@ class WorldServer:
         checkpoint: Callable[[dict], None] | None = None,
         checkpoint_every_s: float = 5.0,
         tap=None,
+        samples: int = 0,
     ):
         self.session = session
         self.keys = keys
@@ -103,6 +112,9 @@ class WorldServer:
         # An observer tap (deploy/observe/tap.py: WorldTap): gets every tick's Senses and Acts
         # to record them, and streams frames at a bounded wall-clock rate.
         self.tap = tap
+        # Observers' request, passed to every agent in its Welcome: log up to this many poses of
+        # the belief's population in each Act (drawn by the view, recorded; 0: none).
+        self.samples = samples
         n = world.n_robots
         self.errors = ErrorCounter()
         self.stats = TickStats()
@@ -135,7 +147,7 @@ class WorldServer:
             self._joined[join.robot_id] = True
         welcome = Welcome(
             robot_id=join.robot_id, run=self.keys.run, seed=self.world.seed,
-            scenario=self.scenario,
+            scenario=self.scenario, samples=self.samples,
         )
         query.reply(self.keys.join, encode(welcome))
 
@@ -251,6 +263,7 @@ class WorldServer:
         world = self.world
         n = world.n_robots
         self.stats.started_s = time.perf_counter()
+        self.stats.cpu_started_s = time.process_time()
         period = world.tick_s
         next_tick_at = time.monotonic()
         next_checkpoint_at = time.monotonic() + self.checkpoint_every_s
@@ -276,7 +289,9 @@ class WorldServer:
             for robot, sense in senses:
                 self._sense_pub[robot].put(sense)
             if self.tap is not None:
+                c0 = time.thread_time()
                 self.tap.sensed(senses)
+                self.stats.tap_cpu_s += time.thread_time() - c0
             started = time.monotonic()
             self._collect(started)
             with self._cond:
@@ -286,7 +301,9 @@ class WorldServer:
                 self._acts = [None] * n
             world.step(acts)
             if self.tap is not None:
+                c0 = time.thread_time()
                 self.tap.stepped(acts)
+                self.stats.tap_cpu_s += time.thread_time() - c0
             self.stats.ticks += 1
             self.stats.tick_durations_s.append(time.perf_counter() - t0)
             if world.tick % self.state_every_ticks == 0 or world.done:

@@ -12,7 +12,13 @@ from __future__ import annotations
 import numpy as np
 
 from swarmloc.agents.brains import BrainError
-from swarmloc.agents.laser.localizer import LaserObservation, LocalizerSetup, RadioMessage, Sighting
+from swarmloc.agents.laser.localizer import (
+    LaserObservation,
+    LocalizerSetup,
+    RadioMessage,
+    Sighting,
+    population_samples,
+)
 from swarmloc.protocol.errors import ErrorCounter
 from swarmloc.protocol.messages import EstimateAct, LaserSense, Welcome
 
@@ -20,9 +26,12 @@ from swarmloc.protocol.messages import EstimateAct, LaserSense, Welcome
 class LaserAgent:
     sense_type = LaserSense
 
-    def __init__(self, localizer, robot_id: int) -> None:
+    def __init__(self, localizer, robot_id: int, samples: int = 0) -> None:
         self.localizer = localizer
         self.robot_id = robot_id
+        #: How many poses of its population each Act logs for observers (the world's
+        #: ``Welcome.samples``: ``swarmloc run/world --particles N``); 0: none.
+        self.samples = samples
 
     @classmethod
     def from_welcome(cls, welcome: Welcome, scenario) -> LaserAgent:
@@ -40,7 +49,7 @@ class LaserAgent:
             raise BrainError(f"the world's laser scenario is not usable: {exc}") from None
         setup = LocalizerSetup.from_world_config(config, welcome.robot_id, algo.cooperative)
         localizer = entry.build(setup, dict(params), agent_rng(config.seed, welcome.robot_id))
-        return cls(localizer, welcome.robot_id)
+        return cls(localizer, welcome.robot_id, welcome.samples)
 
     def act(self, sense: LaserSense, errors: ErrorCounter) -> EstimateAct:
         obs = LaserObservation(
@@ -61,4 +70,5 @@ class LaserAgent:
         return EstimateAct(
             tick=sense.tick, robot_id=self.robot_id,
             pose_estimate=tuple(estimate.tolist()), payload=self.localizer.outgoing(), command=(),
+            samples=population_samples(self.localizer, self.samples),
         )

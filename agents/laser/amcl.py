@@ -698,6 +698,16 @@ def _check_setup(setup: LocalizerSetup) -> None:
             raise ValueError(f"{name} must be >= 0, got {getattr(setup, name)!r}")
 
 
+def _low_variance_index(weights: np.ndarray, k: int) -> np.ndarray:
+    """Indices of ``k`` draws from ``weights`` by low-variance resampling with a fixed offset of
+    one half: the ``(i + 1/2) / k`` quantiles of the weights' cumulative sum (no random draw)."""
+    cumulative = np.cumsum(weights)
+    cumulative /= cumulative[-1]
+    return np.minimum(
+        np.searchsorted(cumulative, (0.5 + np.arange(k)) / k, side="right"), weights.shape[0] - 1
+    )
+
+
 class AMCLLocalizer:
     """The AMCL-style particle filter as a :class:`~swarmloc.agents.laser.localizer.Localizer`.
 
@@ -896,18 +906,19 @@ class AMCLLocalizer:
         """Share of the posterior weight in the cluster :meth:`estimate` comes from."""
         return self._share
 
+    def samples(self, n: int) -> np.ndarray:
+        """At most ``n`` poses of the last posterior, drawn as :meth:`belief_summary` draws its
+        poses (low-variance resampling with a fixed offset: no random draw), for observers."""
+        particles, weights = self._posterior
+        return particles[_low_variance_index(weights, min(n, particles.shape[0]))]
+
     def belief_summary(self) -> BeliefSummary:
         """``share_samples`` poses drawn from the last posterior by low-variance resampling with a
         fixed offset of one half (no random draw), equally weighted, with the sharing kernel
         widened by one step of odometry noise (the receiver uses it one step later)."""
         particles, weights = self._posterior
         k = self.params.share_samples
-        cumulative = np.cumsum(weights)
-        cumulative /= cumulative[-1]
-        index = np.minimum(
-            np.searchsorted(cumulative, (0.5 + np.arange(k)) / k, side="right"),
-            particles.shape[0] - 1,
-        )
+        index = _low_variance_index(weights, k)
         motion_std = self.filter._motion_std
         return BeliefSummary(
             robot_id=int(self.setup.robot_id),

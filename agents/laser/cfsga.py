@@ -125,6 +125,7 @@ from swarmloc.agents.laser.localizer import (
     LocalizerSetup,
     RadioMessage,
     Sighting,
+    evenly_spaced,
 )
 from swarmloc.world.laser.laser import cast_rays, unicycle_model, wrap_angle
 from swarmloc.world.laser.maps import SegmentMap, build_map, free_space_sample
@@ -900,6 +901,10 @@ class CFSGALocalizer:
 
     def estimate(self) -> np.ndarray:
         return self.ga.best_pose
+
+    def samples(self, n: int) -> np.ndarray:
+        """At most ``n`` individuals of the population, evenly spaced through it (for observers)."""
+        return evenly_spaced(self.ga.population, n)
 
     def outgoing(self) -> bytes | None:
         return self._outgoing

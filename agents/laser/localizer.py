@@ -110,3 +110,28 @@ class Localizer(Protocol):
 
     def outgoing(self) -> bytes | None:
         """What to broadcast to teammates after this step (None: nothing)."""
+
+    # Optional: ``samples(n) -> (k, 3)``, at most ``n`` poses of the belief's population (particles,
+    # GA individuals) for observers to draw (:func:`population_samples`). It must not draw from
+    # the localizer's generator or change its state: watching a run must not change it.
+
+
+def evenly_spaced(poses: np.ndarray, n: int) -> np.ndarray:
+    """At most ``n`` rows of ``poses``, evenly spaced through it (every row when it has no more
+    than ``n``): a subsample with no random draw."""
+    count = poses.shape[0]
+    if count <= n:
+        return poses
+    return poses[np.arange(n) * count // n]
+
+
+def population_samples(localizer, n: int) -> tuple[tuple[float, float, float], ...]:
+    """What an Act logs for observers (``EstimateAct.samples``): at most ``n`` finite poses of the
+    localizer's population from its optional ``samples(n)``; none when it has no such method, or
+    when ``n`` is 0 (nobody asked)."""
+    method = getattr(localizer, "samples", None)
+    if n <= 0 or method is None:
+        return ()
+    poses = np.asarray(method(n), dtype=float).reshape(-1, 3)[:n]
+    poses = poses[np.isfinite(poses).all(axis=1)]
+    return tuple(map(tuple, poses.tolist()))

@@ -106,6 +106,7 @@ from swarmloc.agents.laser.localizer import (
     LaserObservation,
     LocalizerSetup,
     Sighting,
+    evenly_spaced,
 )
 from swarmloc.world.laser.laser import cast_rays, unicycle_model, wrap_angle
 from swarmloc.world.laser.maps import SegmentMap, build_map, free_space_sample
@@ -692,6 +693,10 @@ class GeneticLocalizer:
         """The best individual of the last step ``(x_m, y_m, theta_rad)`` (before any step: an
         individual of the uniform initial population)."""
         return self._best.copy()
+
+    def samples(self, n: int) -> np.ndarray:
+        """At most ``n`` individuals of the population, evenly spaced through it (for observers)."""
+        return evenly_spaced(self.population, n)
 
     def outgoing(self) -> bytes | None:
         """This step's scan for teammates' eq. 2 (None before the first step or when the robot

@@ -22,6 +22,8 @@ from pathlib import Path
 
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
 DEFAULT_HTTP = "127.0.0.1:8765"
+#: ``--particles`` alone: poses of each laser robot's population per Act (MAX_SAMPLES at most).
+PARTICLES = 100
 
 
 # -- flags on existing commands ----------------------------------------------------------------
@@ -34,9 +36,34 @@ def add_world_arguments(p) -> None:
                    help="write every tick's world state and the agents' estimates to FILE.mcap")
     g.add_argument("--record-messages", action="store_true",
                    help="with --record: also every Sense and Act (the protocol's bytes)")
+    add_particles_argument(g)
     g.add_argument("--frame-hz", type=float, default=FRAME_HZ,
                    help=f"most frames per wall-clock second streamed to views (default {FRAME_HZ:g}; "
                         f"0: none)")
+
+
+def particles_count(text: str) -> int:
+    """``--particles N``: 0..MAX_SAMPLES, else an argparse error naming the bound."""
+    import argparse
+
+    from swarmloc.protocol.messages import MAX_SAMPLES
+
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+    if not 0 <= n <= MAX_SAMPLES:
+        raise argparse.ArgumentTypeError(f"must be within 0..{MAX_SAMPLES} (the protocol's bound on "
+                                         f"the poses one Act may log), got {n}")
+    return n
+
+
+def add_particles_argument(g) -> None:
+    g.add_argument("--particles", type=particles_count, default=0, nargs="?", const=PARTICLES,
+                   metavar="N",
+                   help=f"ask the agents to log up to N poses of their population or particles in "
+                        f"each Act (laser robots), for the view and the recording (N default "
+                        f"{PARTICLES} when the flag is given alone; 0, the default: none)")
 
 
 def add_run_arguments(p) -> None:
@@ -48,12 +75,16 @@ def add_run_arguments(p) -> None:
                    help="the world-server writes every tick to FILE.mcap")
     g.add_argument("--record-messages", action="store_true",
                    help="with --record: also every Sense and Act")
+    add_particles_argument(g)
 
 
-def record_world_args(record: str | None, record_messages: bool) -> tuple[str, ...]:
+def record_world_args(record: str | None, record_messages: bool, particles: int = 0) -> tuple[str, ...]:
+    """The world-server's flags for what ``swarmloc run`` was asked to record and show."""
+    out: tuple[str, ...] = ("--particles", str(particles)) if particles else ()
     if not record:
-        return ()
-    return ("--record", str(Path(record).resolve()), *(("--record-messages",) if record_messages else ()))
+        return out
+    return (*out, "--record", str(Path(record).resolve()),
+            *(("--record-messages",) if record_messages else ()))
 
 
 def start_view(sup, endpoint: str, run: str, http: str, log_path: Path | None = None,
@@ -169,6 +200,8 @@ def main_view(args) -> int:
 # -- swarmloc record ---------------------------------------------------------------------------
 
 def main_record(args) -> int:
+    import msgpack
+
     from swarmloc.deploy.observe.record import RecordingWriter
     from swarmloc.deploy.observe.tap import frame_key
     from swarmloc.protocol.keys import Keys
@@ -187,7 +220,7 @@ def main_record(args) -> int:
 
         def on_frame(sample):
             try:
-                frame = json.loads(sample.payload.to_bytes())
+                frame = msgpack.unpackb(sample.payload.to_bytes(), strict_map_key=False)
                 frame.pop("done", None)
                 with lock:
                     if frame["tick"] > state["last"] and not writer._file.closed:
@@ -216,6 +249,7 @@ def main_record(args) -> int:
 # -- swarmloc replay ---------------------------------------------------------------------------
 
 def main_replay(args) -> int:
+    import msgpack
     import zenoh
 
     from swarmloc.deploy.observe.record import RecordingError, dumps, read_recording
@@ -253,6 +287,7 @@ def main_replay(args) -> int:
               flush=True)
         tick_s = scene.get("tick_s") or 0.1
         period = 1.0 / FRAME_HZ
+        pack = msgpack.Packer().pack
         start = time.monotonic()
         first_tick = recording.frames[0]["tick"] if recording.frames else 0
         next_frame_at = 0.0
@@ -271,10 +306,10 @@ def main_replay(args) -> int:
             now = time.monotonic()
             if now >= next_frame_at:
                 next_frame_at = now + period
-                frame_pub.put(dumps(frame))
+                frame_pub.put(pack(frame))
             last = frame
         if last is not None:
-            frame_pub.put(dumps({**last, "done": True}))
+            frame_pub.put(pack({**last, "done": True}))
             end_pub.put(encode(RunEnd(tick=last["tick"], reason="replayed", metrics={})))
         for d in (state_pub, frame_pub, end_pub, queryable, token):
             d.undeclare()

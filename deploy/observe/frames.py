@@ -8,7 +8,8 @@ A frame (schema ``swarmloc.Frame``, docs/recording.md) is plain JSON-friendly da
      "estimates": [[x, y, theta] | None, ...]     # each robot's belief of its own pose, world frame
      "beliefs":   [[{"label", "x", "y", "radius_m"}, ...], ...]   # what else it believes, world frame
      "links":     [[from, to], ...]               # who heard (or saw) whom this tick
-     "metrics":   {"round_trips", "position_error_m", ...}}
+     "metrics":   {"round_trips", "position_error_m", ...},
+     "samples":   [[[x, y, theta], ...], ...]}    # optional: each robot's population (--particles)
 
 and a scene (``swarmloc.Scene``) holds what does not move: the bounds, the walls, the discs (nest,
 prey, ball, obstacles), the landmarks. One :class:`FrameSource` per robot family turns a served
@@ -200,7 +201,8 @@ def brain_goals(brain) -> tuple:
 
 
 class LaserSource(FrameSource):
-    """Laser robots: each one's best pose estimate (map frame); who saw whom and the radio."""
+    """Laser robots: each one's best pose estimate (map frame); who saw whom and the radio; and,
+    when the world asked for them (``--particles``), the poses of each one's population."""
 
     def scene(self) -> dict:
         w = self.service.world
@@ -218,8 +220,13 @@ class LaserSource(FrameSource):
             for r, o in enumerate(self.service.world.observe()):
                 links += [[s.robot_id, r] for s in o.sightings]
                 links += [[m.sender_id, r] for m in o.received]
-        return {"truth": truth, "estimates": estimates, "beliefs": [[] for _ in truth], "links": links,
-                "metrics": {"round_trips": 0, "position_error_m": _mean_error(truth, estimates)}}
+        out = {"truth": truth, "estimates": estimates, "beliefs": [[] for _ in truth], "links": links,
+               "metrics": {"round_trips": 0, "position_error_m": _mean_error(truth, estimates)}}
+        # Populations, when the world asked the agents for them (--particles): poses in the map frame.
+        samples = [[list(p) for p in a.samples] if a is not None else [] for a in self.last_acts]
+        if any(samples):
+            out["samples"] = samples
+        return out
 
 
 class VisionSource(FrameSource):

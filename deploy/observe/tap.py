@@ -5,7 +5,8 @@ The world-server (world/server.py) calls :meth:`WorldTap.sensed` with the Senses
 
 - writes every tick's frame (and with ``record_messages`` every Sense and Act) to an MCAP file
   in-process, so a lockstep recording is exact and misses no tick;
-- publishes a frame on ``swarmloc/<run>/world/frame`` at most ``max_hz`` times per *wall-clock*
+- publishes a frame (msgpack, the recording's frame encoding: JSON of a 100-robot frame took 580
+  us, msgpack 40) on ``swarmloc/<run>/world/frame`` at most ``max_hz`` times per *wall-clock*
   second, and only while someone subscribes (Zenoh's matching status), so a view never costs the
   lockstep more than a bounded few frames a second;
 - answers ``swarmloc/<run>/world/scene`` with the static scene (a view that attaches late asks).
@@ -16,6 +17,8 @@ from __future__ import annotations
 import logging
 import time
 from pathlib import Path
+
+import msgpack
 
 from swarmloc.deploy.observe.frames import frame_source
 from swarmloc.deploy.observe.record import RecordingWriter, dumps
@@ -61,6 +64,7 @@ class WorldTap:
         self._rate_t, self._rate_tick = time.monotonic(), service.tick
         self._rate = None
         self._frame = None
+        self._pack = msgpack.Packer().pack  # the world's thread only
         if self.writer is not None:
             self._frame = self.source.frame()
             self.writer.frame(self._frame)  # tick 0, before any step
@@ -103,7 +107,7 @@ class WorldTap:
             return
         frame = self._frame if self._frame is not None else self.source.frame()
         metrics = {**frame["metrics"], "ticks_per_s": self._rate}
-        self._pub.put(dumps({**frame, "metrics": metrics, "done": bool(self.service.done)}))
+        self._pub.put(self._pack({**frame, "metrics": metrics, "done": bool(self.service.done)}))
         self.published += 1
 
     def close(self) -> None:

@@ -23,6 +23,7 @@ import time
 from importlib import resources
 from pathlib import Path
 
+import msgpack
 from aiohttp import WSMsgType, web
 
 from swarmloc.deploy.observe.record import dumps
@@ -108,12 +109,12 @@ class ViewServer:
     # -- live feed (called from Zenoh's threads) ---------------------------------------------
 
     def feed(self, payload: bytes) -> None:
-        """A frame from the world's stream; bad ones are counted, never raised (ZENOH.md)."""
+        """A frame (msgpack) from the world's stream; bad ones are counted, never raised (ZENOH.md)."""
         try:
-            frame = json.loads(payload)
+            frame = msgpack.unpackb(payload, strict_map_key=False)
             if not isinstance(frame, dict) or "tick" not in frame:
                 raise ValueError("not a frame")
-        except ValueError:
+        except (ValueError, TypeError, msgpack.UnpackException):
             self.stats.bad_messages += 1
             return
         text = _text({"type": "frame", "frame": frame})

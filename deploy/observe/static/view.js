@@ -8,7 +8,7 @@
   const cctx = chart.getContext("2d");
   const $ = (id) => document.getElementById(id);
   const TRUE = "#d62728", DEAD = "#777777", EST = "rgba(31,119,180,0.55)";
-  const BELIEF = "rgba(44,160,44,0.55)", LINK = "#ff9900";
+  const BELIEF = "rgba(44,160,44,0.55)", LINK = "#ff9900", SAMPLE = "#17becf";
   const state = { scene: null, frame: null, mode: null, paused: false, history: [], frames: 0,
                   transform: null, socket: null, lastTick: -1 };
   window.swarmloc = state;
@@ -68,7 +68,14 @@
     if (!f || !t) return;
     const r = robotRadiusPx();
     const truth = f.truth;
-    // links under everything else
+    // populations (particles, GA individuals) under everything else: a 3-pixel square each
+    if (f.samples && $("samples").checked) {
+      ctx.fillStyle = SAMPLE;
+      for (const own of f.samples) {
+        for (const p of own) ctx.fillRect(Math.round(t.px(p[0])) - 1, Math.round(t.py(p[1])) - 1, 3, 3);
+      }
+    }
+    // links under the robots
     ctx.strokeStyle = LINK; ctx.lineWidth = 1.5;
     ctx.beginPath();
     for (const [a, b] of f.links) {
@@ -176,6 +183,7 @@
       `${k}: ${typeof v === "number" && !Number.isInteger(v) ? v.toFixed(4) : v}`).join("\n");
     if (state.mode === "recording" && !state.dragging) $("slider").value = String(f.tick);
     if (f.done) $("status").textContent = "run ended";
+    if (f.samples) $("samples-toggle").hidden = false;
     drawFrame();
     drawChart();
   }
@@ -193,6 +201,7 @@
   };
   $("slider").oninput = () => { state.dragging = true; state.seek(Number($("slider").value)); };
   $("slider").onchange = () => { state.dragging = false; };
+  $("samples").onchange = () => drawFrame();
   $("speed").onchange = () => send({ cmd: "speed", x: Number($("speed").value) });
 
   function connect() {
