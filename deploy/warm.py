@@ -31,6 +31,7 @@ run after :func:`ensure_compiled` adds nothing to the cache.
 from __future__ import annotations
 
 import fcntl
+import hashlib
 import json
 import os
 import platform
@@ -42,7 +43,6 @@ from pathlib import Path
 
 from swarmloc.kernel_cache import cache_dir
 
-STAMP_NAME = "swarmloc-kernels.stamp"
 LOCK_NAME = "swarmloc-kernels.lock"
 #: What the user is told while the kernels compile (measured on the project's 2-core machine).
 COMPILING_MESSAGE = "compiling kernels, once per machine (under a minute)"
@@ -98,9 +98,18 @@ def fingerprint() -> str:
     }, indent=1)
 
 
+def stamp_path(folder: Path) -> Path:
+    """This install's stamp in the cache ``folder``. One per install, named by where its sources
+    are: numba keys its entries by source path, so two checkouts or installs sharing a cache
+    folder never share entries, and with one stamp between them each took the other's for stale
+    and both recompiled in turn, waiting on each other's lock."""
+    key = hashlib.sha256("\n".join(map(str, _package_dirs())).encode()).hexdigest()[:12]
+    return folder / f"swarmloc-kernels-{key}.stamp"
+
+
 def is_warm(folder: Path | None = None) -> bool:
     """True if ``folder`` (default: this process's cache folder) has a current stamp."""
-    stamp = (folder or cache_dir()) / STAMP_NAME
+    stamp = stamp_path(folder or cache_dir())
     try:
         return stamp.read_text(encoding="utf-8") == fingerprint()
     except OSError:
@@ -137,9 +146,10 @@ def ensure_compiled(say: Callable[[str], None] | None = None, *, force: bool = F
         say(f"{COMPILING_MESSAGE} into {folder}")
         t0 = time.perf_counter()
         compile_all()
-        tmp = folder / f"{STAMP_NAME}.{os.getpid()}.tmp"
+        stamp = stamp_path(folder)
+        tmp = stamp.with_name(f"{stamp.name}.{os.getpid()}.tmp")
         tmp.write_text(fingerprint(), encoding="utf-8")
-        os.replace(tmp, folder / STAMP_NAME)
+        os.replace(tmp, stamp)
         say(f"kernels ready ({time.perf_counter() - t0:.0f} s)")
     return True
 

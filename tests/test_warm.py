@@ -24,7 +24,7 @@ from pathlib import Path
 import pytest
 from processes import run_swarmloc
 
-from swarmloc.deploy.warm import COMPILING_MESSAGE, STAMP_NAME, fingerprint, is_warm, kernel_sources
+from swarmloc.deploy.warm import COMPILING_MESSAGE, fingerprint, is_warm, kernel_sources, stamp_path
 from swarmloc.kernel_cache import default_dir
 
 REPO = Path(__file__).resolve().parents[1]
@@ -40,12 +40,24 @@ def test_the_stamp_names_every_kernel_source_and_a_changed_source_makes_it_stale
     assert {"kernels.py", "agent_tick.py", "wire.py", "social_codec.py", "batch.py"} <= names
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
     assert not is_warm(tmp_path)
-    (tmp_path / STAMP_NAME).write_text(fingerprint())
+    stamp_path(tmp_path).write_text(fingerprint())
     assert is_warm(tmp_path)
     stale = json.loads(fingerprint())
     stale["sources"][0][1] -= 1  # numba would see another modification time and recompile
-    (tmp_path / STAMP_NAME).write_text(json.dumps(stale, indent=1))
+    stamp_path(tmp_path).write_text(json.dumps(stale, indent=1))
     assert not is_warm(tmp_path)
+
+
+def test_each_install_keeps_its_own_stamp_in_a_shared_cache_folder(tmp_path, monkeypatch):
+    # Two checkouts sharing ~/.cache/swarmloc/numba: numba keys entries by source path, so each
+    # install's stamp must be its own, or each takes the other's for stale and recompiles.
+    from swarmloc.deploy import warm
+
+    here = stamp_path(tmp_path)
+    here.write_text(fingerprint())
+    monkeypatch.setattr(warm, "_package_dirs", lambda: [tmp_path / "another-checkout"])
+    assert stamp_path(tmp_path) != here
+    assert not is_warm(tmp_path)  # the other install finds no stamp of its own
 
 
 def test_the_cache_is_per_user_and_falls_back_when_home_is_not_writable(tmp_path, monkeypatch):
@@ -119,7 +131,7 @@ def test_a_non_editable_install_warms_once_and_runs_from_another_folder(tmp_path
     assert [p.returncode for p in procs] == [0, 0, 0], outputs
     assert sum(COMPILING_MESSAGE in o for o in outputs) == 1, outputs
     cache = home / ".cache" / "swarmloc" / "numba"
-    assert (cache / STAMP_NAME).exists(), outputs
+    assert len(list(cache.glob("swarmloc-kernels-*.stamp"))) == 1, outputs  # the installed copy's
     assert not list(Path(site).rglob("*.nbi")), "kernels cached beside the installed sources"
 
     run = run_swarmloc(["run", "--duration-s", "60", "--run", "installed"], env=env, cwd=elsewhere,
