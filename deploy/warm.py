@@ -18,8 +18,12 @@ first ``swarmloc run`` of every new machine failed that way. So compiling is a s
 
 The stamp holds what numba keys its cache entries by: each kernel source's path, modification
 time and size (the files of the package that declare ``cache=True``), the versions of Python,
-numba and numpy, and the CPU. A checkout that touches a kernel source, an upgrade or another CPU
-sharing the home folder makes it stale, and the next piece compiles again, once.
+numba and numpy, and the CPU; also the swarmloc modules a kernel source imports from, whose
+constants the kernels freeze. A checkout that touches one of those, an upgrade or another CPU
+sharing the home folder makes it stale, and the next piece compiles again, once, after
+:func:`forget_cached` has deleted this install's entries: numba checks an entry against its own
+source file only, so a kernel whose callee in another file changed (or a constant it imports) would
+otherwise load its old machine code, silently (``tests/test_warm.py`` shows it on two small files).
 
 What "every kernel a run calls" means is :func:`exercise`: a few ticks of a served e-puck world
 answered by agents on both of their paths (bytes to bytes, and decode-step-encode), for every
@@ -48,18 +52,21 @@ LOCK_NAME = "swarmloc-kernels.lock"
 COMPILING_MESSAGE = "compiling kernels, once per machine (under a minute)"
 
 
-def _package_dirs() -> list[Path]:
-    """The folders of swarmloc's subpackages, wherever the install put them (an editable install
-    maps them to the repository's top-level folders)."""
+def _packages() -> list:
+    """swarmloc's root package and its four mapped subpackages, wherever the install put them
+    (an editable install maps them to the repository's top-level folders)."""
     import swarmloc
     import swarmloc.agents
     import swarmloc.deploy
     import swarmloc.protocol
     import swarmloc.world
 
-    return sorted({Path(p).resolve() for m in (swarmloc, swarmloc.agents, swarmloc.deploy,
-                                               swarmloc.protocol, swarmloc.world)
-                   for p in m.__path__})
+    return [swarmloc, swarmloc.agents, swarmloc.deploy, swarmloc.protocol, swarmloc.world]
+
+
+def _package_dirs() -> list[Path]:
+    """The folders of swarmloc's subpackages."""
+    return sorted({Path(p).resolve() for m in _packages() for p in m.__path__})
 
 
 def kernel_sources() -> list[Path]:
@@ -73,6 +80,42 @@ def kernel_sources() -> list[Path]:
             except OSError:
                 continue
     return found
+
+
+def _imported_modules(sources: list[Path]) -> list[Path]:
+    """The swarmloc modules the kernel sources import from (``from swarmloc.x import NAME``),
+    found by reading the sources, without importing anything (a regular expression: parsing
+    them took 60 ms, at every piece's start)."""
+    import re
+
+    roots = {m.__name__: Path(next(iter(m.__path__))).resolve() for m in _packages()}
+    found = set()
+    for path in sources:
+        for module in re.findall(r"^\s*from\s+(swarmloc(?:\.\w+)*)\s+import\b",
+                                 path.read_text(encoding="utf-8"), flags=re.MULTILINE):
+            root = max((r for r in roots if module == r or module.startswith(r + ".")), key=len)
+            base = roots[root].joinpath(*module[len(root):].split(".")[1:])
+            for candidate in (base.with_suffix(".py"), base / "__init__.py"):
+                if candidate.is_file():
+                    found.add(candidate)
+                    break
+    return sorted(found - set(sources))
+
+
+def forget_cached(folder: Path, sources: list[Path]) -> int:
+    """Delete numba's entries for ``sources`` from the cache ``folder`` (where numba's
+    ``NUMBA_CACHE_DIR`` locator puts them); returns how many files went. The next import compiles
+    them from today's sources."""
+    from numba.core.caching import UserProvidedCacheLocator
+
+    removed = 0
+    for source in sources:
+        sub = folder / UserProvidedCacheLocator.get_suitable_cache_subpath(str(source))
+        for entry in sub.glob(f"{source.stem}.*"):
+            if entry.suffix in (".nbi", ".nbc"):
+                entry.unlink(missing_ok=True)
+                removed += 1
+    return removed
 
 
 def _cpu() -> str:
@@ -89,7 +132,8 @@ def fingerprint() -> str:
     from importlib.metadata import version
 
     sources = []
-    for path in kernel_sources():
+    kernels = kernel_sources()
+    for path in kernels + _imported_modules(kernels):
         st = path.stat()
         sources.append([str(path), st.st_mtime_ns, st.st_size])
     return json.dumps({
@@ -145,6 +189,8 @@ def ensure_compiled(say: Callable[[str], None] | None = None, *, force: bool = F
             return False
         say(f"{COMPILING_MESSAGE} into {folder}")
         t0 = time.perf_counter()
+        if not force:  # stale: nothing of this install's cache may survive (module docstring)
+            forget_cached(folder, kernel_sources())
         compile_all()
         stamp = stamp_path(folder)
         tmp = stamp.with_name(f"{stamp.name}.{os.getpid()}.tmp")

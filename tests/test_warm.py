@@ -60,6 +60,34 @@ def test_each_install_keeps_its_own_stamp_in_a_shared_cache_folder(tmp_path, mon
     assert not is_warm(tmp_path)  # the other install finds no stamp of its own
 
 
+def test_a_stale_stamp_forgets_entries_numba_would_keep_for_a_changed_callee(tmp_path):
+    # numba checks a cached function against its own file only: ``outer`` in one file keeps the
+    # machine code of ``inner`` from another file after ``inner`` changed. forget_cached (called
+    # by ensure_compiled on a stale stamp) deletes the entries so the next import recompiles.
+    from swarmloc.deploy.warm import forget_cached
+
+    code, cache = tmp_path / "code", tmp_path / "cache"
+    code.mkdir()
+    (code / "callee.py").write_text("from numba import njit\n\n@njit(cache=True)\n"
+                                    "def inner():\n    return 1\n")
+    (code / "caller.py").write_text("from numba import njit\nfrom callee import inner\n\n"
+                                    "@njit(cache=True)\ndef outer():\n    return inner() * 10\n")
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(cache), "PYTHONPATH": str(code)}
+
+    def outer() -> int:
+        out = subprocess.run([sys.executable, "-c", "import caller; print(caller.outer())"],
+                             check=False, env=env, cwd=code, capture_output=True, text=True,
+                             timeout=120)
+        assert out.returncode == 0, out.stderr
+        return int(out.stdout)
+
+    assert outer() == 10
+    (code / "callee.py").write_text((code / "callee.py").read_text().replace("return 1", "return 22"))
+    stale = outer()  # numba 0.68 alone gives 10 here: the old inner, silently
+    assert forget_cached(cache, [code / "caller.py", code / "callee.py"]) >= 2
+    assert outer() == 220, f"before forget_cached: {stale}"
+
+
 def test_the_cache_is_per_user_and_falls_back_when_home_is_not_writable(tmp_path, monkeypatch):
     monkeypatch.delenv("XDG_CACHE_HOME", raising=False)
     monkeypatch.setenv("HOME", str(tmp_path / "home"))
