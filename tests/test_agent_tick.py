@@ -44,9 +44,19 @@ def _corrupt(sense: EpuckSense, tick: int) -> EpuckSense:
     return dataclasses.replace(sense, received=(dataclasses.replace(first, payload=bad), *sense.received[1:]))
 
 
-@pytest.mark.parametrize("strategy", [s for s, v in STRATEGIES.items() if v.confidence == "distance" and not v.central])
-def test_packed_tick_gives_the_reference_acts(strategy):
-    loaded = load_any("ES1", {"seed": 3}, [f'agent.strategy="{strategy}"', "world.robots=10"])
+#: Every reading of issue 18 away from its default (AgentConfig: p_after_fusion, sends,
+#: give_up_factor, encounter_memory).
+READINGS = ('agent.p_after_fusion="distance"', 'agent.sends="last-visited"', "agent.give_up_factor=1.5",
+            "agent.encounter_memory=16")
+
+
+@pytest.mark.parametrize(
+    ("strategy", "readings"),
+    [(s, ()) for s, v in STRATEGIES.items() if v.confidence == "distance" and not v.central]
+    + [("SSGIKF", READINGS), ("DSGIFF", READINGS)],
+)
+def test_packed_tick_gives_the_reference_acts(strategy, readings):
+    loaded = load_any("ES1", {"seed": 3}, [f'agent.strategy="{strategy}"', "world.robots=10", *readings])
     sc = loaded.scenario
     world = served_world(loaded)
     packed, wire, reference = _agents(sc, True), _agents(sc, True), _agents(sc, False)

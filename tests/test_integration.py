@@ -121,8 +121,15 @@ def _batch_trajectory(scenario, every_ticks: int) -> dict[int, list]:
     return poses
 
 
-def test_process_run_matches_batch_engine(tmp_path):
-    scenario, path = _scenario(tmp_path, ["world.robots=4", "world.duration_s=40.0", "world.seed=7"])
+#: Every reading of issue 18 away from its default (AgentConfig: p_after_fusion, sends,
+#: give_up_factor, encounter_memory): the agents read them from the scenario as the batch does.
+READINGS = ['agent.p_after_fusion="distance"', 'agent.sends="last-visited"', "agent.give_up_factor=1.5",
+            "agent.encounter_memory=16"]
+
+
+@pytest.mark.parametrize("readings", [[], READINGS], ids=["defaults", "readings"])
+def test_process_run_matches_batch_engine(tmp_path, readings):
+    scenario, path = _scenario(tmp_path, ["world.robots=4", "world.duration_s=40.0", "world.seed=7", *readings])
     with supervised() as sup:
         swarm = Swarm(sup, tmp_path, path, robots=4)
         if "ZENOH_RUNTIME" not in os.environ:  # e-puck agents, and only they, run Zenoh on one thread
