@@ -15,6 +15,7 @@ import math
 import msgpack
 import numpy as np
 import pytest
+from readings import READINGS
 
 from swarmloc.agents.epuck.agent import ForagingAgent
 from swarmloc.agents.epuck.agent_tick import PackedForagingTick
@@ -44,10 +45,6 @@ def _corrupt(sense: EpuckSense, tick: int) -> EpuckSense:
     return dataclasses.replace(sense, received=(dataclasses.replace(first, payload=bad), *sense.received[1:]))
 
 
-#: Every reading of issue 18 away from its default (AgentConfig: p_after_fusion, sends,
-#: give_up_factor, encounter_memory).
-READINGS = ('agent.p_after_fusion="distance"', 'agent.sends="last-visited"', "agent.give_up_factor=1.5",
-            "agent.encounter_memory=16")
 
 
 @pytest.mark.parametrize(

@@ -21,6 +21,7 @@ import math
 import numpy as np
 import pytest
 from numba import njit
+from readings import READINGS
 
 from swarmloc import numerics
 from swarmloc.agents.epuck import kernels as agent_kernels
@@ -237,10 +238,6 @@ def test_the_goals_sent_are_the_reference_ones(sends):
     assert np.all(out.messages.goal_distance_m[expected] > 0.0)
 
 
-#: Every reading of issue 18 away from its default (AgentConfig: p_after_fusion, sends,
-#: give_up_factor, encounter_memory).
-READINGS = ['agent.p_after_fusion="distance"', 'agent.sends="last-visited"', "agent.give_up_factor=1.5",
-            "agent.encounter_memory=16"]
 
 
 @pytest.mark.parametrize("readings", [[], READINGS], ids=["defaults", "readings"])
@@ -426,16 +423,20 @@ def _reference_step(world, pose, cmd, sending, rng):
     steps = np.where(alive[:, None], np.clip(cmd, -body.max_wheel_speed_steps_s, body.max_wheel_speed_steps_s)
                      * cfg.tick_s, 0.0)
     heard = deliver(pose, sending & alive, cfg.medium, rng)
-    s = cfg.odometry.slip_fraction
-    du = steps * body.metres_per_step * (1.0 + rng.uniform(-s, s, (len(pose), 2)))
-    moved = integrate_pose(pose, du[:, 0], du[:, 1], body.wheelbase_m)
+    s, n_sub = cfg.odometry.slip_fraction, cfg.odometry.substeps
+    slips = rng.uniform(-s, s, (n_sub, len(pose), 2))  # one slip per wheel and physics sub-step
+    moved = pose
+    for k in range(n_sub):
+        du = steps / n_sub * body.metres_per_step * (1.0 + slips[k])
+        moved = integrate_pose(moved, du[:, 0], du[:, 1], body.wheelbase_m)
     moved[:, :2] = resolve_collisions(moved[:, :2], body.body_radius_m, world.arena, iterations=2)
     return moved, steps, heard
 
 
-@pytest.mark.parametrize("case", ["plain", "crowd", "moved_in_between", "small_buffers"])
+@pytest.mark.parametrize("case", ["plain", "crowd", "moved_in_between", "small_buffers", "substeps"])
 def test_world_ticks_are_the_model_functions(case):
-    scenario = load_scenario("ES1", ["world.robots=30", "agent.strategy=SSGIKF", "world.duration_s=12"])
+    substeps = ["world.odometry.substeps=10"] if case == "substeps" else []
+    scenario = load_scenario("ES1", ["world.robots=30", "agent.strategy=SSGIKF", "world.duration_s=12", *substeps])
     world = ForagingWorld(scenario.world)
     brain = swarm_brain(scenario)
     if case == "crowd":  # bodies on top of each other: the KD-tree collisions of arena.py

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import pytest
 import zenoh
+from readings import READINGS
 
 from swarmloc.deploy.lab.epuck.batch import run_batch, run_ticks, swarm_brain
 from swarmloc.deploy.launch import ONE_THREAD_ZENOH_RUNTIME, supervised
@@ -121,10 +122,6 @@ def _batch_trajectory(scenario, every_ticks: int) -> dict[int, list]:
     return poses
 
 
-#: Every reading of issue 18 away from its default (AgentConfig: p_after_fusion, sends,
-#: give_up_factor, encounter_memory): the agents read them from the scenario as the batch does.
-READINGS = ['agent.p_after_fusion="distance"', 'agent.sends="last-visited"', "agent.give_up_factor=1.5",
-            "agent.encounter_memory=16"]
 
 
 @pytest.mark.parametrize("readings", [[], READINGS], ids=["defaults", "readings"])
