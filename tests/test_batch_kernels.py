@@ -493,10 +493,11 @@ def _swarm_state(world, brain):
             brain.partner_ids, brain.partner_until, [g.random() for g in brain.rngs]]
 
 
-@pytest.mark.parametrize("case", ["NC", "SSGIKF", "DSGIFF", "GLOBAL_RB", "crowd", "no_room"])
+@pytest.mark.parametrize("case", ["NC", "SSGIKF", "DSGIFF", "GLOBAL_RB", "crowd", "no_room", "readings"])
 def test_compiled_ticks_leave_world_and_brains_as_their_methods_do(case):
     strategy = case if case in ("NC", "SSGIKF", "DSGIFF", "GLOBAL_RB") else "SSGIFF"
-    scenario = load_scenario("ES1", ["world.robots=20", f"agent.strategy={strategy}", "world.duration_s=15"])
+    readings = READINGS if case == "readings" else ()
+    scenario = load_scenario("ES1", ["world.robots=20", f"agent.strategy={strategy}", "world.duration_s=15", *readings])
     runs = []
     for compiled in (True, False):
         world, brain = ForagingWorld(scenario.world), swarm_brain(scenario)
