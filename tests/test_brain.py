@@ -455,6 +455,9 @@ def test_agent_config_rejects_unknown_strategy_with_a_suggestion():
         ("beta", -0.01),
         ("arrival_tolerance_m", -0.02),
         ("heard_capacity", 5),
+        ("p_after_fusion", "posterior"),
+        ("sends", "last"),
+        ("give_up_factor", -1.0),
     ],
 )
 def test_agent_config_rejects_impossible_values_naming_the_field(field, value):
