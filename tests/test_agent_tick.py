@@ -15,6 +15,7 @@ import math
 import msgpack
 import numpy as np
 import pytest
+from readings import READINGS
 
 from swarmloc.agents.epuck.agent import ForagingAgent
 from swarmloc.agents.epuck.agent_tick import PackedForagingTick
@@ -44,9 +45,15 @@ def _corrupt(sense: EpuckSense, tick: int) -> EpuckSense:
     return dataclasses.replace(sense, received=(dataclasses.replace(first, payload=bad), *sense.received[1:]))
 
 
-@pytest.mark.parametrize("strategy", [s for s, v in STRATEGIES.items() if v.confidence == "distance" and not v.central])
-def test_packed_tick_gives_the_reference_acts(strategy):
-    loaded = load_any("ES1", {"seed": 3}, [f'agent.strategy="{strategy}"', "world.robots=10"])
+
+
+@pytest.mark.parametrize(
+    ("strategy", "readings"),
+    [(s, ()) for s, v in STRATEGIES.items() if v.confidence == "distance" and not v.central]
+    + [("SSGIKF", READINGS), ("DSGIFF", READINGS)],
+)
+def test_packed_tick_gives_the_reference_acts(strategy, readings):
+    loaded = load_any("ES1", {"seed": 3}, [f'agent.strategy="{strategy}"', "world.robots=10", *readings])
     sc = loaded.scenario
     world = served_world(loaded)
     packed, wire, reference = _agents(sc, True), _agents(sc, True), _agents(sc, False)

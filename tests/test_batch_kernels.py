@@ -21,6 +21,7 @@ import math
 import numpy as np
 import pytest
 from numba import njit
+from readings import READINGS
 
 from swarmloc import numerics
 from swarmloc.agents.epuck import kernels as agent_kernels
@@ -31,7 +32,7 @@ from swarmloc.agents.epuck.foraging import (
     SocialMessages,
     agent_rng,
 )
-from swarmloc.agents.epuck.social_odometry import sgiff_update
+from swarmloc.agents.epuck.social_odometry import sent_goals, sgiff_update, sgikf_update
 from swarmloc.deploy.lab.epuck.batch import CompiledTicks, inbox_from, run_ticks, swarm_brain
 from swarmloc.deploy.scenario import load_scenario
 from swarmloc.protocol.epuck import (
@@ -157,16 +158,19 @@ def test_merged_uniform_draws_are_numpys_uniform():
     np.testing.assert_array_equal(split, merged)
 
 
-def _fermi_brain(beta: float) -> ForagingBrain:
-    config = AgentConfig(strategy="DSGIFF", beta=beta)
+def _fusing_brain(strategy: str, beta: float, p_after_fusion: str) -> ForagingBrain:
+    config = AgentConfig(strategy=strategy, beta=beta, p_after_fusion=p_after_fusion)
     return ForagingBrain(config, EpuckBody(), [0], [agent_rng(1, 0)], 0.1)
 
 
-def test_several_fermi_fusions_in_one_tick_match_the_filter_functions():
-    # Two fresh neighbours, each knowing both goals: four Fermi fusions in one tick, each needing
-    # numpy's exp (the kernel stops and resumes for each), applied in (sender, goal) order.
+@pytest.mark.parametrize("p_after_fusion", ["fused", "distance"])
+@pytest.mark.parametrize("strategy", ["DSGIFF", "DSGIKF"])
+def test_several_fusions_in_one_tick_match_the_filter_functions(strategy, p_after_fusion):
+    # Two fresh neighbours, each knowing both goals: four fusions in one tick (the Fermi ones each
+    # needing numpy's exp: the kernel stops and resumes for each), applied in (sender, goal)
+    # order; p after each as AgentConfig.p_after_fusion reads the seed (table 1 or eq. 23).
     beta = 0.01
-    brain = _fermi_brain(beta)
+    brain = _fusing_brain(strategy, beta, p_after_fusion)
     brain.known[0] = True
     brain.target[0] = 0
     brain.goal_xy[0] = [[1.0, 0.0], [0.0, 2.0]]
@@ -195,20 +199,53 @@ def test_several_fermi_fusions_in_one_tick_match_the_filter_functions():
             phi = gamma_own + alpha - np.pi
             d = msg.goal_distance_m[m, goal]
             other = np.array([range_m * np.cos(gamma_own) + d * np.cos(phi), range_m * np.sin(gamma_own) + d * np.sin(phi)])
-            x_new, p_new = sgiff_update(x[None, goal], p[None, goal], other[None], np.array([msg.goal_p_m[m, goal] / unit]), beta)
+            p_other = np.array([msg.goal_p_m[m, goal] / unit])
+            if strategy == "DSGIFF":
+                x_new, p_new = sgiff_update(x[None, goal], p[None, goal], other[None], p_other, beta, p_after_fusion)
+            else:
+                x_new, p_new = sgikf_update(x[None, goal], p[None, goal], other[None], p_other, p_after_fusion)
             x[goal], p[goal] = x_new[0], p_new[0]
     brain.step(np.zeros((1, 2)), np.zeros((1, 8)), np.ones((1, 3)), inbox)
     # The brain moved by 0 (no encoder counts) and p grew by 0: the fusions alone changed it.
     np.testing.assert_allclose(brain.goal_xy[0], x, rtol=0, atol=1e-15)
     np.testing.assert_allclose(brain.goal_p_m[0] / unit, p, rtol=1e-15)
     assert not np.allclose(x, [[1.0, 0.0], [0.0, 2.0]])  # the test did exercise fusion
+    # By hand: eq. 23 leaves p at the distance travelled (3 m, 5 m); table 1 changed it.
+    if p_after_fusion == "distance":
+        np.testing.assert_array_equal(brain.goal_p_m[0], [3.0, 5.0])
+    else:
+        assert not np.allclose(brain.goal_p_m[0], [3.0, 5.0])
 
 
-def test_swarm_brain_equals_brains_of_one_over_the_wire():
+@pytest.mark.parametrize("sends", ["both", "last-visited"])
+def test_the_goals_sent_are_the_reference_ones(sends):
+    # Five robots, one per case: heading for the nest or the prey knowing both, heading for the
+    # prey knowing only it (recruited), wandering knowing the nest, wandering knowing nothing.
+    config = AgentConfig(strategy="SSGIKF", sends=sends)
+    brain = ForagingBrain(config, EpuckBody(), np.arange(5), [agent_rng(1, i) for i in range(5)], 0.1)
+    brain.known[:] = [[True, True], [True, True], [False, True], [True, False], [False, False]]
+    brain.target[:] = [0, 1, 1, -1, -1]
+    brain.goal_xy[:] = 1.0
+    out = brain.step(np.zeros((5, 2)), np.zeros((5, 8)), np.ones((5, 3)), Inbox.empty(3))
+    expected = sent_goals(brain.known, brain.target, sends)
+    np.testing.assert_array_equal(out.messages.goal_known, expected)
+    # By hand (seed 001 §4.2, "the last visited area": the goal the robot is not heading to)
+    by_hand = {"both": [[1, 1], [1, 1], [0, 1], [1, 0], [0, 0]],
+               "last-visited": [[0, 1], [1, 0], [0, 0], [1, 0], [0, 0]]}[sends]
+    np.testing.assert_array_equal(expected, np.array(by_hand, bool))
+    # a goal not sent carries zeros, as an unknown one
+    assert np.all(out.messages.goal_distance_m[~expected] == 0.0) and np.all(out.messages.goal_p_m[~expected] == 0.0)
+    assert np.all(out.messages.goal_distance_m[expected] > 0.0)
+
+
+
+
+@pytest.mark.parametrize("readings", [[], READINGS], ids=["defaults", "readings"])
+def test_swarm_brain_equals_brains_of_one_over_the_wire(readings):
     # The batch engine steps one brain holding the whole swarm; agent processes each step a
     # brain of one, with messages that crossed the wire as msgpack payloads. Same seeded run,
     # same trajectories, bit for bit: the kernels do not depend on the batch size.
-    scenario = load_scenario("ES1", ["agent.strategy=DSGIFF", "world.duration_s=40", "world.seed=3"])
+    scenario = load_scenario("ES1", ["agent.strategy=DSGIFF", "world.duration_s=40", "world.seed=3", *readings])
     worlds = [ForagingWorld(scenario.world), ForagingWorld(scenario.world)]
     swarm = swarm_brain(scenario)
     ids = swarm.robot_ids
@@ -386,16 +423,20 @@ def _reference_step(world, pose, cmd, sending, rng):
     steps = np.where(alive[:, None], np.clip(cmd, -body.max_wheel_speed_steps_s, body.max_wheel_speed_steps_s)
                      * cfg.tick_s, 0.0)
     heard = deliver(pose, sending & alive, cfg.medium, rng)
-    s = cfg.odometry.slip_fraction
-    du = steps * body.metres_per_step * (1.0 + rng.uniform(-s, s, (len(pose), 2)))
-    moved = integrate_pose(pose, du[:, 0], du[:, 1], body.wheelbase_m)
+    s, n_sub = cfg.odometry.slip_fraction, cfg.odometry.substeps
+    slips = rng.uniform(-s, s, (n_sub, len(pose), 2))  # one slip per wheel and physics sub-step
+    moved = pose
+    for k in range(n_sub):
+        du = steps / n_sub * body.metres_per_step * (1.0 + slips[k])
+        moved = integrate_pose(moved, du[:, 0], du[:, 1], body.wheelbase_m)
     moved[:, :2] = resolve_collisions(moved[:, :2], body.body_radius_m, world.arena, iterations=2)
     return moved, steps, heard
 
 
-@pytest.mark.parametrize("case", ["plain", "crowd", "moved_in_between", "small_buffers"])
+@pytest.mark.parametrize("case", ["plain", "crowd", "moved_in_between", "small_buffers", "substeps"])
 def test_world_ticks_are_the_model_functions(case):
-    scenario = load_scenario("ES1", ["world.robots=30", "agent.strategy=SSGIKF", "world.duration_s=12"])
+    substeps = ["world.odometry.substeps=10"] if case == "substeps" else []
+    scenario = load_scenario("ES1", ["world.robots=30", "agent.strategy=SSGIKF", "world.duration_s=12", *substeps])
     world = ForagingWorld(scenario.world)
     brain = swarm_brain(scenario)
     if case == "crowd":  # bodies on top of each other: the KD-tree collisions of arena.py
@@ -452,10 +493,11 @@ def _swarm_state(world, brain):
             brain.partner_ids, brain.partner_until, [g.random() for g in brain.rngs]]
 
 
-@pytest.mark.parametrize("case", ["NC", "SSGIKF", "DSGIFF", "GLOBAL_RB", "crowd", "no_room"])
+@pytest.mark.parametrize("case", ["NC", "SSGIKF", "DSGIFF", "GLOBAL_RB", "crowd", "no_room", "readings"])
 def test_compiled_ticks_leave_world_and_brains_as_their_methods_do(case):
     strategy = case if case in ("NC", "SSGIKF", "DSGIFF", "GLOBAL_RB") else "SSGIFF"
-    scenario = load_scenario("ES1", ["world.robots=20", f"agent.strategy={strategy}", "world.duration_s=15"])
+    readings = READINGS if case == "readings" else ()
+    scenario = load_scenario("ES1", ["world.robots=20", f"agent.strategy={strategy}", "world.duration_s=15", *readings])
     runs = []
     for compiled in (True, False):
         world, brain = ForagingWorld(scenario.world), swarm_brain(scenario)

@@ -223,6 +223,32 @@ def test_arriving_at_the_estimate_and_seeing_the_area_is_not_lost():
     assert log[-1][3] == TARGET_PREY | KNOWS_BOTH
 
 
+@pytest.mark.parametrize("give_up_factor", [0.0, 1.5])
+def test_a_robot_gives_up_on_an_estimate_it_cannot_reach_only_if_told_to(give_up_factor):
+    # Issue 18, reading 5: nest seen at the start, prey estimate put 1 m ahead by hand; the
+    # robot then backs away from it (an estimate beyond a wall is never reached either).
+    brain = make_brain(give_up_factor=give_up_factor)
+    brain.known[0, PREY] = True
+    brain.goal_xy[0, PREY] = [1.0, 0.0]
+    step(brain, (0, 0), ground=BLACK)  # on the nest: target prey, budget set
+    assert brain.target[0] == PREY
+    # the nest is stored 3 cm ahead (the ground sensor); the pose is the origin: 1 m to go
+    budget_m = give_up_factor * 1.0
+    per_tick_m = 400 * M_PER_STEP  # -400 steps on both wheels in one tick: straight back
+    lost_at = None
+    for k in range(1, 600):  # about 3.1 m backwards
+        step(brain, (-400, -400))
+        if brain.lost_count[0]:
+            lost_at = k
+            break
+    if give_up_factor == 0.0:
+        assert lost_at is None and brain.target[0] == PREY  # today: never gives up
+        return
+    # lost on the first tick whose travel reaches the budget (by hand: ceil(1.5 / 0.01288))
+    assert lost_at == math.ceil(budget_m / per_tick_m - 1e-9)
+    assert brain.known[0].tolist() == [False, False] and brain.target[0] == -1
+
+
 # ---------------------------------------------------------------------------------------------
 # Sending
 # ---------------------------------------------------------------------------------------------
@@ -429,6 +455,9 @@ def test_agent_config_rejects_unknown_strategy_with_a_suggestion():
         ("beta", -0.01),
         ("arrival_tolerance_m", -0.02),
         ("heard_capacity", 5),
+        ("p_after_fusion", "posterior"),
+        ("sends", "last"),
+        ("give_up_factor", -1.0),
     ],
 )
 def test_agent_config_rejects_impossible_values_naming_the_field(field, value):

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import pytest
 import zenoh
+from readings import READINGS
 
 from swarmloc.deploy.lab.epuck.batch import run_batch, run_ticks, swarm_brain
 from swarmloc.deploy.launch import ONE_THREAD_ZENOH_RUNTIME, supervised
@@ -121,8 +122,11 @@ def _batch_trajectory(scenario, every_ticks: int) -> dict[int, list]:
     return poses
 
 
-def test_process_run_matches_batch_engine(tmp_path):
-    scenario, path = _scenario(tmp_path, ["world.robots=4", "world.duration_s=40.0", "world.seed=7"])
+
+
+@pytest.mark.parametrize("readings", [[], READINGS], ids=["defaults", "readings"])
+def test_process_run_matches_batch_engine(tmp_path, readings):
+    scenario, path = _scenario(tmp_path, ["world.robots=4", "world.duration_s=40.0", "world.seed=7", *readings])
     with supervised() as sup:
         swarm = Swarm(sup, tmp_path, path, robots=4)
         if "ZENOH_RUNTIME" not in os.environ:  # e-puck agents, and only they, run Zenoh on one thread

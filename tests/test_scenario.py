@@ -125,6 +125,9 @@ def test_more_wrong_types_name_the_field(override, path):
     [
         ("world.duration_s=-1.0", "duration_s"),
         ("world.odometry.slip_fraction=1.5", "slip_fraction"),
+        ("world.odometry.substeps=0", "substeps"),
+        ("agent.p_after_fusion='prior'", "p_after_fusion"),
+        ("agent.sends='nest'", "sends"),
         ("world.arena.nest_centre_m=[5.0, 0.255]", "nest"),
         ("world.robots=1000", "robots"),  # 1000 e-pucks cover 3.85 m^2 of a 2.04 m^2 arena
         ("world.robots=0", "robots"),

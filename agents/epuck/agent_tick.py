@@ -68,6 +68,9 @@ I_HEADER, I_ROBOT_IDS, I_SENDER_LEN, I_START, I_STATE = (
     VIEWS.index(x) - _N_FLOAT_VIEWS for x in ("header", "robot_ids", "msg_sender_len", "msg_start", "state"))
 
 
+# numba keys a cached kernel by its own source file only: a kernel of another file it calls
+# (world/epuck/kernels.py: step_tick, agents/epuck/kernels.py: brain_tick) can change without
+# invalidating it: edit this file too when one does (issue 18 changed both), so that it recompiles.
 @njit(cache=True, error_model="numpy")
 def _take(buf, o, size):
     """``size`` items of the buffer ``buf`` from offset ``o``, and the offset after them."""

@@ -112,7 +112,54 @@ class AgentConfig:
     #: is ignored until it has been out of hearing for this long. Fusing every message of one
     #: encounter would make the SGIKF overconfident (p shrinks with each correlated copy).
     encounter_gap_s: float = 2.0
+    #: How many recent partners a robot remembers. When all slots hold partners still within the
+    #: gap, the one expiring first is evicted, and if it is still in range the pair can fuse again
+    #: within one encounter (issue 18, reading 6). 16 slots (the most) make that practically never
+    #: happen at the seeds' densities; 4 is today's default.
     encounter_memory: int = 4
+
+    # -- Readings of the seeds' text where it contradicts itself or is silent (issue 18). The
+    # defaults are the behaviour the published reproductions (docs/social-odometry-000/) were made
+    # with; deploy/experiments/so-000-readings.toml ablates them.
+
+    #: What ``p`` is after a fusion (issue 18, reading 1). Seed 000 contradicts itself here:
+    #:
+    #: - ``"fused"`` (default): table 1 and eq. 13, "p_{k|k-1} = p_{k-1|k-1} + Delta d_k": the
+    #:   fused ``p`` of eq. 22 (SGIKF) / eq. 26 (SGIFF) is kept and grows with the distance
+    #:   travelled, so every fusion leaves a robot more confident;
+    #: - ``"distance"``: eq. 23, "we define the inverse of the a priori confidence level
+    #:   (p_{k|k-1}^i) of robot i as the distance travelled (d_k^i) since the robot left a
+    #:   specific area. [...] p_{k|k-1}^i = d_k^i" (and §4.2.2 for the SGIFF: "also calculated as
+    #:   the distance travelled since the robot left a specific area"); seed 001 §4.2: "the
+    #:   robots use the inverse of the distance traveled as a confidence level". A fusion moves
+    #:   the estimate (eq. 21 / 25) but leaves ``p`` at the distance travelled. A goal adopted
+    #:   from a neighbour (eq. 14) takes the neighbour's ``p`` and grows from there, as it did.
+    #:
+    #: The SIKF strategies (``confidence = "covariance"``) ignore it: their prior, eq. 19, is
+    #: propagated from the a posteriori covariance by definition.
+    p_after_fusion: str = "fused"
+    #: Which goal estimates a robot sends (issue 18, reading 2):
+    #:
+    #: - ``"both"`` (default): every goal it knows (seed 000 §4.1: "When two robots encounter they
+    #:   exchange their estimates about the goal areas");
+    #: - ``"last-visited"``: seed 001 §4.2, "While moving from one area to the other, if a robot
+    #:   encounters another robot, it transmits its estimated location of the last visited
+    #:   area"; seed 000 §6.1.2 explains single beating double by the same: "they have better
+    #:   information on the goal they are coming from than the one they are aiming at". A robot
+    #:   with a target sends only the other goal (the area it comes from), if it knows it; a
+    #:   wandering robot (no target: it knows at most the one area it found) sends what it knows,
+    #:   so that recruitment (seed 000 §6.1.1) still works.
+    sends: str = "both"
+    #: Giving up on an estimate that cannot be reached (issue 18, reading 5). Seed 000 §5: "If
+    #: the robot arrives at a place where the area was supposed to be but is not, it resets its
+    #: Goal Locations memory"; an estimate beyond a wall is never arrived at. 0 (default): the
+    #: robot declares itself lost only within ``arrival_tolerance_m`` of the estimate plus the
+    #: overshoot, and meanwhile counts as on the path. ``f > 0``: on setting out for a target (on
+    #: leaving an area, or recruited to one) the robot allows itself ``f`` times the straight-line
+    #: distance to the estimate; having travelled that (odometric distance, eq. 23's measure)
+    #: without reaching the estimate it declares itself lost, as if it had arrived where the area
+    #: should be and not found it. The papers give no such rule: the factor is ours.
+    give_up_factor: float = 0.0
 
     def __post_init__(self):
         try:
@@ -129,6 +176,12 @@ class AgentConfig:
         ):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name}: must be > 0, got {getattr(self, name)}")
+        if self.p_after_fusion not in ("fused", "distance"):
+            raise ValueError(f"p_after_fusion: expected 'fused' or 'distance', got {self.p_after_fusion!r}")
+        if self.sends not in ("both", "last-visited"):
+            raise ValueError(f"sends: expected 'both' or 'last-visited', got {self.sends!r}")
+        if not 0.0 <= self.give_up_factor <= 100.0:
+            raise ValueError(f"give_up_factor: must be in [0, 100] (0: never give up), got {self.give_up_factor}")
         if not self.beta >= 0:
             raise ValueError(f"beta: must be >= 0, got {self.beta}")
         for name in ("cruise_speed_steps_s", "turn_speed_steps_s"):
@@ -364,7 +417,7 @@ class ForagingBrain:
             (kernels.U_METRES_PER_STEP, body.metres_per_step), (kernels.U_WHEELBASE, body.wheelbase_m),
             (kernels.U_BLACK_BELOW, GROUND_BLACK_BELOW), (kernels.U_GREY_BELOW, GROUND_GREY_BELOW),
             (kernels.U_GROUND_AHEAD, _GROUND_AHEAD_M), (kernels.U_BETA, config.beta),
-            (kernels.U_CONFIDENCE_UNIT, config.confidence_unit_m),
+            (kernels.U_CONFIDENCE_UNIT, config.confidence_unit_m), (kernels.U_GIVE_UP_FACTOR, config.give_up_factor),
         ):
             self._params[slot] = float(value)
         self._settings = np.zeros(kernels.N_SETTINGS, np.int64)
@@ -374,6 +427,8 @@ class ForagingBrain:
             (kernels.S_COMMUNICATES, self.strategy.communicates), (kernels.S_DOUBLE, self.strategy.double),
             (kernels.S_GAIN, gain[self.strategy.gain]), (kernels.S_GAP_TICKS, round(config.encounter_gap_s / tick_s)),
             (kernels.S_KNOWS_BOTH, KNOWS_BOTH), (kernels.S_MOTORS, 1),
+            (kernels.S_P_IS_DISTANCE, config.p_after_fusion == "distance"),
+            (kernels.S_SENDS_LAST, config.sends == "last-visited"),
         ):
             self._settings[slot] = int(value)
         self._math = numerics.numpy_math()  # numpy's exp and arctan2, bit for bit

@@ -116,6 +116,9 @@ def brain_update(
     c_heard_ids, c_heard_bearing,
     # strategy; numpy's exp for the Fermi gain (see numpy_math)
     communicates, double, gain, beta, confidence_unit_m, gap_ticks, math_fns,
+    # readings of the seeds (AgentConfig.p_after_fusion, give_up_factor): keep p = distance
+    # travelled after a fusion (eq. 23), the travel budget towards a target (0: none)
+    p_is_distance, give_up_factor,
     # outputs for the motor and send layers: goal vectors (2, N, 3) and who draws a new walk
     geometry, need, n_need,
 ):
@@ -151,9 +154,14 @@ def brain_update(
                 other = 1 - goal
                 target[i] = other if known[i, other] else NONE
                 searching[i] = False
-    # -- lost: arrived where the goal should be, and it is not there
+                if give_up_factor > 0.0 and target[i] >= 0:
+                    search_left_m[i] = give_up_factor * math.hypot(
+                        goal_xy[i, other, 0] - pose[i, 0], goal_xy[i, other, 1] - pose[i, 1])
+    # -- lost: arrived where the goal should be, and it is not there; or (give_up_factor > 0)
+    # travelled its budget towards the target without arriving near the estimate
     for i in range(n):
-        if searching[i] and search_left_m[i] <= 0.0 and area[i] != target[i]:
+        gave_up = give_up_factor > 0.0 and target[i] >= 0 and not searching[i] and search_left_m[i] <= 0.0
+        if (searching[i] or gave_up) and search_left_m[i] <= 0.0 and area[i] != target[i]:
             known[i, 0] = False
             known[i, 1] = False
             goal_p_m[i, 0] = 0.0
@@ -249,7 +257,8 @@ def brain_update(
                             goal_cov[rec, goal, r, c] *= scale
                 goal_xy[rec, goal, 0] = (1.0 - g) * goal_xy[rec, goal, 0] + g * x_other
                 goal_xy[rec, goal, 1] = (1.0 - g) * goal_xy[rec, goal, 1] + g * y_other
-                goal_p_m[rec, goal] = p_new * confidence_unit_m
+                if use_cov or not p_is_distance:  # eq. 22 / 26 (table 1); else p stays d_k, eq. 23
+                    goal_p_m[rec, goal] = p_new * confidence_unit_m
 
         # A wandering robot recruited to a goal heads for it (seed 000 §6.1.1); of two, the nearer.
         for i in range(n):
@@ -265,6 +274,8 @@ def brain_update(
                     best, best_d = goal, d
             target[i] = best
             searching[i] = False
+            if give_up_factor > 0.0:
+                search_left_m[i] = give_up_factor * best_d
 
     # -- remember the nearest neighbours heard this tick: (range, sender id) order
     heard_ids[:] = -1
@@ -385,18 +396,21 @@ def motor_commands(
 
 @njit(cache=True, error_model="numpy")
 def report_into(frame_pose, geometry, atan, known, goal_p_m, heard_ids, heard_bearing_rad, target, knows_both, pose,
-                known_out, distance, angle, p, heard_ids_out, heard_bearing_out, state, pose_out):
+                sends_last, known_out, distance, angle, p, heard_ids_out, heard_bearing_out, state, pose_out):
     """What the brains answer, into preallocated arrays: the fields of the messages they send,
     their state codes (:func:`state_codes`) and a copy of their poses.
 
     Messages: each goal in the body frame of ``frame_pose`` (vectors ``geometry[:, :, 1:]`` and their
     ``atan``, see :func:`goal_vectors`), float32-rounded, zero where unknown, and copies of the
     tables ``(known, distance_m, angle_rad, p_m, heard_ids, heard_bearing_rad)``, written for as
-    many robots as they have rows (none for a strategy that does not communicate)."""
+    many robots as they have rows (none for a strategy that does not communicate). If
+    ``sends_last`` (``AgentConfig.sends = "last-visited"``), a robot with a target leaves it out:
+    it sends only the area it comes from (seed 001 §4.2)."""
     for i in range(known_out.shape[0]):
         for g in range(2):
-            known_out[i, g] = known[i, g]
-            if known[i, g]:
+            sent = known[i, g] and not (sends_last and target[i] == g)
+            known_out[i, g] = sent
+            if sent:
                 distance[i, g] = _f32(math.hypot(geometry[0, i, 1 + g], geometry[1, i, 1 + g]))
                 angle[i, g] = _f32(_wrap(atan[i, 1 + g] - frame_pose[i, 2]))
                 p[i, g] = _f32(goal_p_m[i, g])
@@ -416,9 +430,10 @@ def report_into(frame_pose, geometry, atan, known, goal_p_m, heard_ids, heard_be
 (A_CRUISE, A_SPIN, A_STEERING_GAIN, A_TURN_IN_PLACE, A_ARRIVAL_TOLERANCE, A_SEARCH_OVERSHOOT, A_AVOID_THRESHOLD,
  A_VMAX, A_TURN_LO, A_TURN_SPAN, A_STRAIGHT_LO, A_STRAIGHT_SPAN, A_SPIN_PER_TICK, A_TICK,
  U_METRES_PER_STEP, U_WHEELBASE, U_BLACK_BELOW, U_GREY_BELOW, U_GROUND_AHEAD, U_BETA, U_CONFIDENCE_UNIT,
- N_BRAIN_PARAMS) = range(22)
+ U_GIVE_UP_FACTOR, N_BRAIN_PARAMS) = range(23)
 #: Slots of the brain's integer settings in :func:`brain_tick`'s ``settings``.
-S_DO_ODOMETRY, S_USE_COV, S_COMMUNICATES, S_DOUBLE, S_GAIN, S_GAP_TICKS, S_KNOWS_BOTH, S_MOTORS, N_SETTINGS = range(9)
+(S_DO_ODOMETRY, S_USE_COV, S_COMMUNICATES, S_DOUBLE, S_GAIN, S_GAP_TICKS, S_KNOWS_BOTH, S_MOTORS, S_P_IS_DISTANCE,
+ S_SENDS_LAST, N_SETTINGS) = range(11)
 
 
 @njit(cache=True, error_model="numpy")
@@ -442,8 +457,8 @@ def wander_draws(need, n_need, rng_fn, rng_state, params, turn_ticks, turn_dir, 
 @njit(cache=True, error_model="numpy")
 def act_tick(pose, target, searching, search_left_m, turn_ticks, straight_ticks, turn_dir, geometry, atan, ir,
              cos_ir, sin_ir, params, need, n_need, rng_fn, rng_state, frame_pose, known, goal_p_m, heard_ids,
-             heard_bearing_rad, knows_both, cmd, known_out, distance, angle, p, heard_ids_out, heard_bearing_out,
-             state, pose_out, on_path):
+             heard_bearing_rad, knows_both, sends_last, cmd, known_out, distance, angle, p, heard_ids_out,
+             heard_bearing_out, state, pose_out, on_path):
     """The brains' answer for one tick in one call: :func:`wander_draws` for the robots
     :func:`goal_vectors` put in ``need``, :func:`motor_commands` into ``cmd``,
     :func:`report_into` and ``on_path`` (a target and both goals known: state bits 0-1 and
@@ -454,7 +469,7 @@ def act_tick(pose, target, searching, search_left_m, turn_ticks, straight_ticks,
                    params[A_TURN_IN_PLACE], params[A_ARRIVAL_TOLERANCE], params[A_SEARCH_OVERSHOOT],
                    params[A_AVOID_THRESHOLD], params[A_VMAX], cmd)
     report_into(frame_pose, geometry, atan, known, goal_p_m, heard_ids, heard_bearing_rad, target, knows_both, pose,
-                known_out, distance, angle, p, heard_ids_out, heard_bearing_out, state, pose_out)
+                sends_last, known_out, distance, angle, p, heard_ids_out, heard_bearing_out, state, pose_out)
     for i in range(state.shape[0]):
         on_path[i] = (state[i] & 3) != 0 and (state[i] & knows_both) != 0
 
@@ -491,6 +506,7 @@ def brain_tick(
         c_heard_bearing,
         settings[S_COMMUNICATES] != 0, settings[S_DOUBLE] != 0, settings[S_GAIN], params[U_BETA],
         params[U_CONFIDENCE_UNIT], settings[S_GAP_TICKS], math_fns,
+        settings[S_P_IS_DISTANCE] != 0, params[U_GIVE_UP_FACTOR],
         geometry, need, n_need,
     )
     m = atan.shape[0] * atan.shape[1]
@@ -498,12 +514,13 @@ def brain_tick(
     if settings[S_MOTORS] != 0:
         act_tick(pose, target, searching, search_left_m, turn_ticks, straight_ticks, turn_dir, geometry, atan, ir,
                  cos_ir, sin_ir, params, need, n_need, rng_fn, rng_state, previous_pose, known, goal_p_m, heard_ids,
-                 heard_bearing_rad, settings[S_KNOWS_BOTH], cmd, known_out, distance, angle, p, heard_ids_out,
-                 heard_bearing_out, state, pose_out, on_path)
+                 heard_bearing_rad, settings[S_KNOWS_BOTH], settings[S_SENDS_LAST] != 0, cmd, known_out, distance,
+                 angle, p, heard_ids_out, heard_bearing_out, state, pose_out, on_path)
     else:
         knows_both = settings[S_KNOWS_BOTH]
         report_into(previous_pose, geometry, atan, known, goal_p_m, heard_ids, heard_bearing_rad, target, knows_both,
-                    pose, known_out, distance, angle, p, heard_ids_out, heard_bearing_out, state, pose_out)
+                    pose, settings[S_SENDS_LAST] != 0, known_out, distance, angle, p, heard_ids_out, heard_bearing_out,
+                    state, pose_out)
         for i in range(state.shape[0]):
             on_path[i] = (state[i] & 3) != 0 and (state[i] & knows_both) != 0
 

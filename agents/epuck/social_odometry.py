@@ -21,6 +21,13 @@ messages over the 15 cm medium; each tick every robot takes the mean of the whol
 estimates, carried exactly by a central system (GLOBAL) or by long-range boards with the medium's
 range and bearing noise (GLOBAL_RB) (:mod:`swarmloc.agents.epuck.global_imitation`).
 
+What ``p`` is after a fusion is where seed 000 contradicts itself: table 1 and eq. 13 keep the
+fused ``p`` of eq. 22 / 26 and add the distance travelled to it ("fused", the default), eq. 23
+defines the prior as the distance travelled since the robot left the area ("distance"): the
+updates below return ``p`` either way (``AgentConfig.p_after_fusion`` quotes both texts).
+:func:`sent_goals` is which goals a robot sends: all it knows, or, as seed 001 §4.2 reads, "its
+estimated location of the last visited area" (``AgentConfig.sends``).
+
 The neighbour's estimate arrives in the neighbour's body frame; :func:`transform_received` turns it
 into the receiver's body frame from the range and the two bearings (eq. 27).
 
@@ -91,29 +98,64 @@ def fermi_gain(p_own: np.ndarray, p_other: np.ndarray, beta: float) -> np.ndarra
     return 1.0 / (1.0 + np.exp(z))
 
 
-def sgikf_update(x_own, p_own, x_other, p_other):
-    """SGIKF correction, seed 000 eq. 20-22. ``x`` are ``(M, 2)`` locations, ``p`` ``(M,)``."""
+#: What ``p`` is after a fusion: "fused" (table 1, eq. 13 with eq. 22 / 26) or "distance" (eq. 23).
+P_AFTER_FUSION = ("fused", "distance")
+
+
+def _p_after(p_fused, p_own, p_after_fusion: str):
+    if p_after_fusion == "fused":
+        return p_fused
+    if p_after_fusion == "distance":  # eq. 23: p_{k|k-1} = d_k, whatever the fusion did
+        return np.array(p_own, float, copy=True)
+    raise ValueError(f"p_after_fusion: expected one of {P_AFTER_FUSION}, got {p_after_fusion!r}")
+
+
+def sgikf_update(x_own, p_own, x_other, p_other, p_after_fusion: str = "fused"):
+    """SGIKF correction, seed 000 eq. 20-22. ``x`` are ``(M, 2)`` locations, ``p`` ``(M,)``.
+    ``p_after_fusion="distance"``: ``p`` stays the distance travelled (eq. 23)."""
     g = kalman_gain(p_own, p_other)
     x_new = (1.0 - g)[:, None] * x_own + g[:, None] * x_other
-    return x_new, (1.0 - g) * p_own
+    return x_new, _p_after((1.0 - g) * p_own, p_own, p_after_fusion)
 
 
-def sgiff_update(x_own, p_own, x_other, p_other, beta: float):
-    """SGIFF correction, seed 000 eq. 24-26 (``p`` in the unit ``beta`` is expressed in)."""
+def sgiff_update(x_own, p_own, x_other, p_other, beta: float, p_after_fusion: str = "fused"):
+    """SGIFF correction, seed 000 eq. 24-26 (``p`` in the unit ``beta`` is expressed in).
+    ``p_after_fusion="distance"``: ``p`` stays the distance travelled (eq. 23, §4.2.2)."""
     g = fermi_gain(p_own, p_other, beta)
     x_new = (1.0 - g)[:, None] * x_own + g[:, None] * x_other
-    return x_new, (1.0 - g) * p_own + g * p_other
+    return x_new, _p_after((1.0 - g) * p_own + g * p_other, p_own, p_after_fusion)
 
 
-def fuse(strategy: Strategy, beta: float) -> Callable:
+def fuse(strategy: Strategy, beta: float, p_after_fusion: str = "fused") -> Callable:
     """The update function of a strategy, as ``f(x_own, p_own, x_other, p_other)``."""
     if strategy.gain == "kalman":
-        return sgikf_update
+        return lambda x_own, p_own, x_other, p_other: sgikf_update(
+            x_own, p_own, x_other, p_other, p_after_fusion
+        )
     if strategy.gain == "fermi":
         return lambda x_own, p_own, x_other, p_other: sgiff_update(
-            x_own, p_own, x_other, p_other, beta
+            x_own, p_own, x_other, p_other, beta, p_after_fusion
         )
     raise ValueError(f"strategy {strategy.name} does not fuse estimates")
+
+
+#: Which goals a robot sends: "both" it knows (seed 000 §4.1), or "last-visited" (seed 001 §4.2).
+SENDS = ("both", "last-visited")
+
+
+def sent_goals(known: np.ndarray, target: np.ndarray, sends: str = "both") -> np.ndarray:
+    """Which goals each robot's message carries, ``(N, 2)`` bool, from what it knows ``(N, 2)``
+    and its target ``(N,)`` (0 nest, 1 prey, -1 none). "last-visited": seed 001 §4.2, "it
+    transmits its estimated location of the last visited area": a robot heading for a goal
+    sends the other one, the area it comes from; a robot without a target sends what it knows."""
+    known = np.asarray(known, bool)
+    if sends == "both":
+        return known.copy()
+    if sends != "last-visited":
+        raise ValueError(f"sends: expected one of {SENDS}, got {sends!r}")
+    target = np.asarray(target)
+    heading = np.arange(2)[None, :] == target[:, None]
+    return known & ~heading
 
 
 def transform_received(

@@ -539,23 +539,33 @@ def move_bodies(pose, cmd, alive, vmax, tick_s, metres_per_step, slip_u, slip_lo
     """Wheel commands to encoder counts ``encoder`` ``(N, 2)`` and true poses ``out`` ``(N, 3)``
     (``ForagingWorld.step``; seed 000 eq. 3-7).
 
-    The slip factor of each wheel is ``U(-slip, slip)`` from the ``(N, 2)`` uniforms ``slip_u``
-    (see :func:`uniform`).
+    ``slip_u`` ``(S, N, 2)``: the tick is ``S`` physics sub-steps (``OdometryConfig.substeps``),
+    each wheel travelling ``1/S`` of its commanded steps in each, times its own slip factor
+    ``U(-slip, slip)`` of that sub-step (see :func:`uniform`), the pose integrated after each
+    (eq. 7). The encoders count the commanded steps of the whole tick.
     """
     n = pose.shape[0]
+    n_sub = slip_u.shape[0]
     for i in range(n):
         left = _clip(cmd[i, 0], -vmax, vmax) * tick_s if alive[i] else 0.0
         right = _clip(cmd[i, 1], -vmax, vmax) * tick_s if alive[i] else 0.0
         encoder[i, 0] = left
         encoder[i, 1] = right
-        du_left = left * metres_per_step * (1.0 + uniform(slip_lo, slip_span, slip_u[i, 0]))
-        du_right = right * metres_per_step * (1.0 + uniform(slip_lo, slip_span, slip_u[i, 1]))
-        d_theta = (du_right - du_left) / wheelbase_m
-        d_rho = (du_right + du_left) / 2.0
-        zeta = pose[i, 2] + d_theta / 2.0
-        out[i, 0] = pose[i, 0] + d_rho * math.cos(zeta)
-        out[i, 1] = pose[i, 1] + d_rho * math.sin(zeta)
-        out[i, 2] = wrap(pose[i, 2] + d_theta)
+        x, y, theta = pose[i, 0], pose[i, 1], pose[i, 2]
+        sub_left = left / n_sub  # exact for S = 1
+        sub_right = right / n_sub
+        for s in range(n_sub):
+            du_left = sub_left * metres_per_step * (1.0 + uniform(slip_lo, slip_span, slip_u[s, i, 0]))
+            du_right = sub_right * metres_per_step * (1.0 + uniform(slip_lo, slip_span, slip_u[s, i, 1]))
+            d_theta = (du_right - du_left) / wheelbase_m
+            d_rho = (du_right + du_left) / 2.0
+            zeta = theta + d_theta / 2.0
+            x = x + d_rho * math.cos(zeta)
+            y = y + d_rho * math.sin(zeta)
+            theta = wrap(theta + d_theta)
+        out[i, 0] = x
+        out[i, 1] = y
+        out[i, 2] = theta
 
 
 @njit(cache=True, error_model="numpy")
@@ -709,14 +719,15 @@ def update_round_trips(tick, area, first_visit_tick, round_trips, stage, nest, p
 (P_BODY_RADIUS, P_IR_RANGE, P_WIDTH, P_HEIGHT, P_IR_LO, P_IR_SPAN, P_GROUND_LO, P_GROUND_SPAN, P_PAIR_CUTOFF,
  P_RAB_RANGE, P_RANGE_LO, P_RANGE_SPAN, P_BEARING_LO, P_BEARING_SPAN, P_NEAR, P_LOSS_NEAR, P_LOSS_FAR,
  P_MAX_RECEIVED, P_VMAX, P_TICK, P_METRES_PER_STEP, P_SLIP_LO, P_SLIP_SPAN, P_WHEELBASE, P_ITERATIONS,
- P_AHEAD, N_PARAMS) = range(27)
+ P_AHEAD, P_SUBSTEPS, N_PARAMS) = range(28)
 #: Slots of the counters that :func:`observe_tick` and :func:`step_tick` share with their caller.
 C_PAIRS, C_CROSSED, C_DELIVERED, C_SEPARATED, C_ON_PATH, N_COUNTS = range(6)
 
 
 def world_params(*, body_radius_m, ir_range_m, width_m, height_m, ir_noise, ground_noise, pair_cutoff_m,
                  rab_range_m, range_noise_m, bearing_noise_rad, near_m, loss_near, loss_far, max_received,
-                 vmax, tick_s, metres_per_step, slip_fraction, wheelbase_m, iterations, ahead_m) -> np.ndarray:
+                 vmax, tick_s, metres_per_step, slip_fraction, wheelbase_m, iterations, ahead_m,
+                 substeps=1) -> np.ndarray:
     """The world's constants in one array (slots ``P_*``). Each noise ``f`` becomes the ``low``
     and ``span`` of ``U(-f, f)`` as :func:`uniform` wants them: ``-f`` and ``f - -f``."""
     p = np.zeros(N_PARAMS)
@@ -730,7 +741,7 @@ def world_params(*, body_radius_m, ir_range_m, width_m, height_m, ir_noise, grou
         (P_NEAR, near_m), (P_LOSS_NEAR, loss_near), (P_LOSS_FAR, loss_far), (P_MAX_RECEIVED, max_received),
         (P_VMAX, vmax), (P_TICK, tick_s), (P_METRES_PER_STEP, metres_per_step),
         (P_SLIP_LO, -slip_fraction), (P_SLIP_SPAN, slip_fraction - -slip_fraction), (P_WHEELBASE, wheelbase_m),
-        (P_ITERATIONS, iterations), (P_AHEAD, ahead_m),
+        (P_ITERATIONS, iterations), (P_AHEAD, ahead_m), (P_SUBSTEPS, substeps),
     ):
         p[slot] = float(value)
     return p
@@ -809,7 +820,8 @@ def step_tick(pose, cmd, alive, sending, on_path, params, discs, rng_fn, rng_sta
        ``crossed_ij`` (sender, receiver) and ``crossed_f`` (the range and bearing the receiver
        measures, as :func:`rab_measure`, with numpy's ``arctan2``: :func:`~swarmloc.numerics.np_arctan2`), their
        number to ``counts[C_CROSSED]``; the uniforms for the K range and K bearing noises and the
-       ``(N, 2)`` slips come as one ``random(2 K + 2 N)``;
+       ``(S, N, 2)`` slips of the ``S = params[P_SUBSTEPS]`` sub-steps come as one
+       ``random(2 K + 2 S N)``;
     2. :func:`move_bodies` into ``pose_out`` and ``encoder_out``, :func:`separate_bodies_near`;
     3. if that succeeded (``counts[C_SEPARATED]`` = 1), the metrics' bookkeeping of ``tick``
        (:func:`sensor_areas`, :func:`update_round_trips` with ``stage_codes`` = nest, prey, and the
@@ -821,7 +833,7 @@ def step_tick(pose, cmd, alive, sending, on_path, params, discs, rng_fn, rng_sta
     Scratch (reused from tick to tick: a swarm of thousands would otherwise allocate megabytes
     per tick, which the C library hands back to the system and takes again, page by page):
     ``per_robot`` ``(2, N + 1)``, ``work_i`` ``(5, L)``, ``work_f`` ``(7, L)`` with ``L`` at least
-    twice the pair capacity of ``pair_ij``, ``step_u`` room for ``2 K + 2 N`` uniforms.
+    twice the pair capacity of ``pair_ij``, ``step_u`` room for ``2 K + 2 S N`` uniforms.
 
     Returns ``counts[C_ON_PATH]``, or -1 for a crowd.
     """
@@ -857,7 +869,8 @@ def step_tick(pose, cmd, alive, sending, on_path, params, discs, rng_fn, rng_sta
     k = rab_select_into(receiver, dist, loss_u, m, params[P_NEAR], rab_range_m, params[P_LOSS_NEAR],
                         params[P_LOSS_FAR], int(params[P_MAX_RECEIVED]), keep)
     # The boards' measurements (rab_measure), straight into crossed_f
-    u = step_u[: 2 * k + 2 * n]
+    n_sub = int(params[P_SUBSTEPS])
+    u = step_u[: 2 * k + 2 * n_sub * n]
     fill_random(u, rng_fn, rng_state)
     rel = work_f[5:7, :k] if k <= work_f.shape[1] else np.empty((2, k))
     for q in range(k):
@@ -877,7 +890,7 @@ def step_tick(pose, cmd, alive, sending, on_path, params, discs, rng_fn, rng_sta
         crossed_f[1, q] = wrap(bearing_atan[q] - theta + uniform(bearing_lo, bearing_span, u[k + q]))
     counts[C_CROSSED] = k
     move_bodies(pose, cmd, alive, params[P_VMAX], params[P_TICK], params[P_METRES_PER_STEP],
-                u[2 * k :].reshape((n, 2)), params[P_SLIP_LO], params[P_SLIP_SPAN], params[P_WHEELBASE], pose_out,
+                u[2 * k :].reshape((n_sub, n, 2)), params[P_SLIP_LO], params[P_SLIP_SPAN], params[P_WHEELBASE], pose_out,
                 encoder_out)
     r_m = params[P_BODY_RADIUS]
     pos = pose_out[:, :2].copy()

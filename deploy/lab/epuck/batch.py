@@ -109,6 +109,9 @@ def run_ticks(world: ForagingWorld, brain: ForagingBrain, between: Callable[[], 
 TICK_DONE, TICK_CROWD, TICK_NO_ROOM = 0, 1, 2
 
 
+# numba keys a cached kernel by its own source file only: a kernel of another file it calls
+# (world/epuck/kernels.py: step_tick, agents/epuck/kernels.py: brain_tick) can change without
+# invalidating it: edit this file too when one does (issue 18 changed both), so that it recompiles.
 @njit(cache=True, error_model="numpy")
 def batch_tick(
     step_first,
