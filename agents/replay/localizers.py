@@ -213,6 +213,10 @@ class LandmarkSetup:
     #: Where hypotheses may be drawn (random particles/individuals): x_min, y_min, x_max, y_max.
     #: Default: the landmarks' bounding box grown by 2 m.
     bounds_m: tuple[float, float, float, float] | None = None
+    #: Unknown start: the initial hypotheses are drawn uniformly over this area (x_min, y_min,
+    #: x_max, y_max) and every heading, and ``initial_pose``/``initial_std`` are not used (only
+    #: the population localizers can; None: the known start).
+    initial_area_m: tuple[float, float, float, float] | None = None
 
     def __post_init__(self):
         if isinstance(self.robot_id, bool) or not isinstance(self.robot_id, (int, np.integer)):
@@ -240,6 +244,13 @@ class LandmarkSetup:
         elif len(self.bounds_m) != 4 or not (self.bounds_m[2] > self.bounds_m[0]
                                              and self.bounds_m[3] > self.bounds_m[1]):
             raise ValueError(f"bounds_m must be (x_min, y_min, x_max, y_max), got {self.bounds_m!r}")
+        if self.initial_area_m is not None:
+            area = tuple(float(v) for v in self.initial_area_m)
+            if len(area) != 4 or not all(map(math.isfinite, area)) or \
+                    not (area[2] > area[0] and area[3] > area[1]):
+                raise ValueError(f"initial_area_m must be (x_min, y_min, x_max, y_max), got "
+                                 f"{self.initial_area_m!r}")
+            object.__setattr__(self, "initial_area_m", area)
         object.__setattr__(self, "landmark_ids", ids)
         object.__setattr__(self, "landmark_xy_m", xy)
         object.__setattr__(self, "initial_pose", pose)
@@ -256,7 +267,20 @@ class LandmarkSetup:
         return xy, known
 
     def initial_covariance(self) -> np.ndarray:
+        if self.initial_area_m is not None:  # the uniform's covariance
+            x0, y0, x1, y1 = self.initial_area_m
+            return np.diag([(x1 - x0) ** 2 / 12.0, (y1 - y0) ** 2 / 12.0, math.pi**2 / 3.0])
         return np.diag(np.square(np.asarray(self.initial_std, dtype=np.float64)))
+
+    def initial_hypotheses(self, n: int, rng: np.random.Generator) -> np.ndarray:
+        """``(n, 3)`` initial poses: around the known pose with ``initial_std``, or, for an
+        unknown start, uniform over ``initial_area_m`` and every heading."""
+        if self.initial_area_m is not None:
+            x0, y0, x1, y1 = self.initial_area_m
+            return rng.uniform([x0, y0, -math.pi], [x1, y1, math.pi], size=(n, 3))
+        out = self.initial_pose + rng.normal(size=(n, 3)) * np.asarray(self.initial_std)
+        out[:, 2] = wrap_angle(out[:, 2])
+        return out
 
 
 @runtime_checkable

@@ -44,7 +44,11 @@ class ReplayScenario:
     seed: int = 0
     dt_s: float = 0.02
     duration_s: float | None = None
+    calibration: str = "self"
     calibration_s: float | None = 120.0
+    start: str = "known"
+    kidnap_s: float | None = None
+    kidnap_robot: int | None = None
     params: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -60,7 +64,9 @@ class ReplayScenario:
 
         return ReplayConfig(algorithm=self.algorithm, cooperative=self.cooperative, seed=self.seed,
                             dt_s=self.dt_s, params=dict(self.params), duration_s=self.duration_s,
-                            calibration_s=self.calibration_s)
+                            calibration=self.calibration, calibration_s=self.calibration_s,
+                            start=self.start, kidnap_s=self.kidnap_s,
+                            kidnap_robot=self.kidnap_robot)
 
     @functools.cached_property
     def world(self):  # what the process commands read: seed, robot count, ticks

@@ -32,6 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
+from swarmloc.agents.replay.calibration import SelfCalibratingLocalizer
 from swarmloc.agents.replay.localizers import (
     ALGORITHMS,
     CameraNoise,
@@ -47,6 +48,16 @@ from swarmloc.world.replay.replay import DEFAULT_DT_S, ReplayWorld
 MRCLAM_STREAM = 7
 #: The report's line-up, in table order.
 REPORT_ALGORITHMS = ("dr", "ekf", "pf", "cfsga")
+#: ``ReplayConfig.calibration``: self (no ground truth), the Vicon fit (reference), none.
+CALIBRATIONS = ("self", "vicon", "none")
+#: ``ReplayConfig.start``.
+STARTS = ("known", "unknown")
+#: The localizers that can start from an unknown pose (a population over the whole field).
+GLOBAL_ALGORITHMS = ("pf", "cfsga")
+#: A kidnap's jump told by the odometry: (distance m along the mid-turn heading, turn rad).
+KIDNAP_JUMP = (2.0, math.pi / 2)
+#: Error below which a robot counts as localized (issue 19: 0.3 m, and it must stay there).
+LOCALIZED_M = 0.3
 
 
 @dataclass(frozen=True)
@@ -63,9 +74,24 @@ class ReplayConfig:
     initial_std: tuple[float, float, float] = (0.05, 0.05, 0.05)
     #: Replay only this many seconds from the start (None: the whole data set).
     duration_s: float | None = None
-    #: Calibrate each robot's camera (:func:`fit_camera`) on its first ``calibration_s`` seconds
-    #: of readings against the ground truth; None: use ``camera`` as it is.
+    #: How each robot's camera range bias is found (:data:`CALIBRATIONS`): ``self``, estimated
+    #: while localizing from the robot's own data
+    #: (:class:`~swarmloc.agents.replay.calibration.SelfCalibratingLocalizer`, no ground truth);
+    #: ``vicon``, fitted (:func:`fit_camera`) on the first ``calibration_s`` seconds of readings
+    #: against the Vicon ground truth (a reference: ground truth in the loop); ``none``: ``camera``
+    #: as it is.
+    calibration: str = "self"
+    #: The Vicon fit's window (``calibration="vicon"`` only; None or 0: no fit).
     calibration_s: float | None = 120.0
+    #: ``known``: every localizer starts at the robot's first Vicon pose with ``initial_std``;
+    #: ``unknown``: no knowledge of the pose (uniform over the landmarks' bounding box, every
+    #: heading), for the global localizers only (:data:`GLOBAL_ALGORITHMS`).
+    start: str = "known"
+    #: Kidnap: ``kidnap_s`` seconds after the start, robot ``kidnap_robot`` (a data set id; None:
+    #: the first) is told by its odometry that it jumped ``KIDNAP_JUMP`` (its estimate is
+    #: teleported; the robot did not move). None: no kidnap.
+    kidnap_s: float | None = None
+    kidnap_robot: int | None = None
 
     def __post_init__(self):
         if self.algorithm not in ALGORITHMS:
@@ -76,10 +102,34 @@ class ReplayConfig:
             raise TypeError(f"cooperative must be true or false, got {self.cooperative!r}")
         if self.duration_s is not None and not (math.isfinite(self.duration_s) and self.duration_s > 0):
             raise ValueError(f"duration_s must be > 0, got {self.duration_s!r}")
+        if self.calibration not in CALIBRATIONS:
+            raise ValueError(f"calibration: unknown {self.calibration!r} (known: "
+                             f"{', '.join(CALIBRATIONS)})")
+        if self.calibration_s is not None and not (math.isfinite(self.calibration_s)
+                                                   and self.calibration_s >= 0):
+            raise ValueError(f"calibration_s must be >= 0, got {self.calibration_s!r}")
+        if self.start not in STARTS:
+            raise ValueError(f"start: unknown {self.start!r} (known: {', '.join(STARTS)})")
+        if self.start == "unknown" and self.algorithm not in GLOBAL_ALGORITHMS:
+            raise ValueError(f"start: 'unknown' needs a global localizer ({', '.join(GLOBAL_ALGORITHMS)}"
+                             f"), not {self.algorithm!r} (a single Gaussian cannot start from nowhere)")
+        if self.kidnap_s is not None and not (math.isfinite(self.kidnap_s) and self.kidnap_s > 0):
+            raise ValueError(f"kidnap_s must be > 0, got {self.kidnap_s!r}")
+        if self.kidnap_robot is not None and (isinstance(self.kidnap_robot, bool)
+                                              or not isinstance(self.kidnap_robot, int)):
+            raise ValueError(f"kidnap_robot must be a robot id, got {self.kidnap_robot!r}")
 
     @property
     def label(self) -> str:
-        return f"{self.algorithm}{'+coop' if self.cooperative else ''}"
+        """``algorithm[+coop]``, then what differs from the default tracking run."""
+        tags = [f"{self.algorithm}{'+coop' if self.cooperative else ''}"]
+        if self.calibration != "self":
+            tags.append(f"{self.calibration}-cal")
+        if self.start != "known":
+            tags.append(f"{self.start}-start")
+        if self.kidnap_s is not None:
+            tags.append("kidnap")
+        return " ".join(tags)
 
 
 @dataclass(frozen=True)
@@ -167,7 +217,14 @@ def replay_world(dataset: MrclamDataset, config: ReplayConfig) -> ReplayWorld:
     end = None
     if config.duration_s is not None:
         end = dataset.time_span_s()[0] + config.duration_s
-    return ReplayWorld(dataset, config.dt_s, end_s=end)
+    kidnap = None
+    if config.kidnap_s is not None:
+        rid = dataset.robot_ids[0] if config.kidnap_robot is None else config.kidnap_robot
+        if rid not in dataset.robot_ids:
+            raise ValueError(f"kidnap_robot: {rid} is not a robot of {dataset.name} "
+                             f"({', '.join(map(str, dataset.robot_ids))})")
+        kidnap = (rid, dataset.time_span_s()[0] + config.kidnap_s, KIDNAP_JUMP)
+    return ReplayWorld(dataset, config.dt_s, end_s=end, kidnap=kidnap)
 
 
 def replay_localizer(dataset: MrclamDataset, world: ReplayWorld, config: ReplayConfig, rid: int,
@@ -177,14 +234,21 @@ def replay_localizer(dataset: MrclamDataset, world: ReplayWorld, config: ReplayC
     if initial_pose is None:
         initial_pose = world.initial_poses()[world.robot_ids.index(rid)]
     camera = config.camera
-    if config.calibration_s is not None:
+    if config.calibration == "vicon" and config.calibration_s:
         camera = fit_camera(dataset, rid, world.start_s, world.start_s + config.calibration_s,
                             camera)
+    unknown = config.start == "unknown"
+    lm = dataset.landmarks.xy_m
     setup = LandmarkSetup(robot_id=rid, landmark_ids=dataset.landmarks.ids,
-                          landmark_xy_m=dataset.landmarks.xy_m, initial_pose=initial_pose,
+                          landmark_xy_m=lm,
+                          initial_pose=lm.mean(axis=0).tolist() + [0.0] if unknown else initial_pose,
                           initial_std=config.initial_std, motion=config.motion,
-                          camera=camera, cooperative=config.cooperative)
-    return build_localizer(config.algorithm, setup, robot_rng(config.seed, rid), config.params)
+                          camera=camera, cooperative=config.cooperative,
+                          initial_area_m=((*lm.min(axis=0), *lm.max(axis=0)) if unknown else None))
+    brain = build_localizer(config.algorithm, setup, robot_rng(config.seed, rid), config.params)
+    if config.calibration == "self":
+        brain = SelfCalibratingLocalizer(brain)
+    return brain
 
 
 def run_replay(dataset: MrclamDataset, config: ReplayConfig) -> ReplayResult:
@@ -301,9 +365,20 @@ def add_arguments(p) -> None:
     p.add_argument("--seed", type=int, default=0, help="run seed (default 0)")
     p.add_argument("--dt-s", type=float, default=DEFAULT_DT_S, help="tick length (default 0.02 s)")
     p.add_argument("--duration-s", type=float, default=None, help="replay only this long")
+    p.add_argument("--calibration", default="self",
+                   help="camera range bias: self (estimated while localizing, no ground truth; "
+                        "the default), vicon (fitted against the ground truth: a reference), "
+                        "none")
     p.add_argument("--calibration-s", type=float, default=120.0,
-                   help="calibrate each camera's range bias on the first SECONDS of readings "
-                        "against the ground truth (default 120; 0: no calibration)")
+                   help="with --calibration vicon: fit on the first SECONDS of readings "
+                        "(default 120)")
+    p.add_argument("--start", default="known",
+                   help="known (the first Vicon pose; default) or unknown (uniform over the "
+                        "landmark field, every heading: pf and cfsga only)")
+    p.add_argument("--kidnap-s", type=float, default=None,
+                   help="teleport a robot's estimate this many seconds after the start")
+    p.add_argument("--kidnap-robot", type=int, default=None,
+                   help="the robot kidnapped (data set id; default the first)")
     p.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
                    help="algorithm parameter, value as JSON (repeatable), e.g. --param fusion=\"sgikf\"")
     p.add_argument("--out", default=None,
@@ -328,12 +403,19 @@ def _parse_params(items: Sequence[str]) -> dict:
 
 def main(args) -> int:
     """``swarmloc mrclam``: returns 0, or 2 with a message for a bad folder or option."""
-    dataset = load_dataset(args.path)
+    if args.calibration not in CALIBRATIONS:
+        raise ValueError(f"--calibration: unknown value {args.calibration!r} (known: "
+                         f"{', '.join(CALIBRATIONS)})")
+    if args.start not in STARTS:
+        raise ValueError(f"--start: unknown value {args.start!r} (known: {', '.join(STARTS)})")
     if not args.calibration_s >= 0:
         raise ValueError(f"--calibration-s must be >= 0, got {args.calibration_s}")
     config = ReplayConfig(algorithm=args.algorithm, cooperative=args.cooperative, seed=args.seed,
                           dt_s=args.dt_s, params=_parse_params(args.param),
-                          duration_s=args.duration_s, calibration_s=args.calibration_s or None)
+                          duration_s=args.duration_s, calibration=args.calibration,
+                          calibration_s=args.calibration_s or None, start=args.start,
+                          kidnap_s=args.kidnap_s, kidnap_robot=args.kidnap_robot)
+    dataset = load_dataset(args.path)
     try:
         result = run_replay(dataset, config)
     except TypeError as exc:  # a --param of the wrong type: a usage error like a bad value
@@ -345,7 +427,9 @@ def main(args) -> int:
         plot = plot_trajectories(result, dataset, out / f"trajectories_{config.label.replace('+', '_')}.png")
         (out / "scores.json").write_text(json.dumps(
             {"dataset": dataset.name, "config": config.label, "seed": config.seed,
-             "dt_s": config.dt_s, "calibration_s": config.calibration_s,
+             "dt_s": config.dt_s, "calibration": config.calibration,
+             "calibration_s": config.calibration_s, "start": config.start,
+             "kidnap_s": config.kidnap_s,
              "params": dict(config.params),
              "robots": {str(k): v for k, v in scores.items()}}, indent=2))
         print(f"plot: {plot}")
