@@ -141,6 +141,8 @@ class ReplayResult:
     truth: np.ndarray  #: (T, N, 3), NaN where unknown
     cpu_s: float  #: process CPU time of the replay loop
     rejected_payloads: int = 0
+    #: ``(robot id, tick)`` of the kidnap, or None.
+    kidnap: tuple[int, int] | None = None
 
     def position_error_m(self) -> np.ndarray:
         """(T, N) distance between estimate and truth (NaN where no truth)."""
@@ -273,25 +275,60 @@ def run_replay(dataset: MrclamDataset, config: ReplayConfig) -> ReplayResult:
         world.step(outgoing)
     cpu = time.process_time() - t0
     return ReplayResult(config, world.robot_ids, world.tick_end_times_s.copy(), estimates,
-                        world.ground_truth(), cpu, rejected)
+                        world.ground_truth(), cpu, rejected, world.kidnap_tick)
+
+
+def localized_from(error_m: np.ndarray, threshold_m: float = LOCALIZED_M) -> int | None:
+    """The first tick from which the error (``(T,)``, NaN where unscored) is under
+    ``threshold_m`` at every scored tick to the end; None if the last scored tick is not."""
+    scored = np.flatnonzero(np.isfinite(error_m))
+    if not scored.size:
+        return None
+    bad = scored[error_m[scored] >= threshold_m]
+    if not bad.size:
+        return 0
+    if bad[-1] == scored[-1]:
+        return None
+    return int(bad[-1]) + 1
 
 
 def score(result: ReplayResult) -> dict[int, dict[str, float]]:
-    """Per robot: position RMSE [m], heading RMSE [rad], final position error [m], and the
-    number of ticks scored."""
+    """Per robot: position RMSE [m], heading RMSE [rad], final position error [m], the number
+    of ticks scored; ``localized_s``, the time from the start until the error falls under
+    :data:`LOCALIZED_M` and stays there to the end (NaN: never), and ``rmse_localized_m``, the
+    position RMSE from then on; for the kidnapped robot ``recovery_s``, the same time counted
+    from the kidnap (NaN for the others, or if it never recovers)."""
     out = {}
     err = result.position_error_m()
     heading = wrap_angle(result.estimates[..., 2] - result.truth[..., 2])
+    dt = result.config.dt_s
+    start = result.times_s[0] - dt
     for i, rid in enumerate(result.robot_ids):
         ok = np.isfinite(err[:, i])
         last = np.flatnonzero(ok)[-1] if ok.any() else None
+        k = localized_from(err[:, i])
+        after = err[k:, i][np.isfinite(err[k:, i])] if k is not None else np.zeros(0)
+        recovery = math.nan
+        if result.kidnap is not None and result.kidnap[0] == rid:
+            kk = result.kidnap[1]
+            back = localized_from(err[kk:, i])
+            if back is not None:
+                recovery = float(result.times_s[kk + back] - result.times_s[kk])
         out[rid] = {
             "position_rmse_m": float(np.sqrt(np.mean(err[ok, i] ** 2))) if ok.any() else math.nan,
             "heading_rmse_rad": float(np.sqrt(np.mean(heading[ok, i] ** 2))) if ok.any() else math.nan,
             "final_error_m": float(err[last, i]) if last is not None else math.nan,
             "scored_ticks": int(ok.sum()),
+            "localized_s": float(result.times_s[k] - dt - start) if k is not None else math.nan,
+            "rmse_localized_m": float(np.sqrt(np.mean(after**2))) if after.size else math.nan,
+            "recovery_s": recovery,
         }
     return out
+
+
+def plot_name(label: str) -> str:
+    """A configuration's label as a file name part."""
+    return label.replace("+", "_").replace(" ", "_")
 
 
 def plot_trajectories(result: ReplayResult, dataset: MrclamDataset, path: Path,
@@ -342,10 +379,12 @@ def format_table(rows: Sequence[tuple[str, dict[int, dict[str, float]]]],
 def print_scores(result: ReplayResult, scores: dict[int, dict[str, float]], name: str) -> None:
     print(f"{name}: {result.config.label}, seed {result.config.seed}, dt {result.config.dt_s} s, "
           f"{len(result.times_s)} ticks, CPU {result.cpu_s:.1f} s")
-    print(f"{'robot':>6} {'pos RMSE [m]':>13} {'heading RMSE [rad]':>19} {'final err [m]':>14}")
+    print(f"{'robot':>6} {'pos RMSE [m]':>13} {'heading RMSE [rad]':>19} {'final err [m]':>14} "
+          f"{'localized [s]':>14} {'RMSE after [m]':>15} {'recovery [s]':>13}")
     for rid, s in scores.items():
         print(f"{rid:>6} {s['position_rmse_m']:13.3f} {s['heading_rmse_rad']:19.3f} "
-              f"{s['final_error_m']:14.3f}")
+              f"{s['final_error_m']:14.3f} {s['localized_s']:14.1f} {s['rmse_localized_m']:15.3f} "
+              f"{s['recovery_s']:13.1f}")
     pos = [s["position_rmse_m"] for s in scores.values()]
     head = [s["heading_rmse_rad"] for s in scores.values()]
     print(f"{'mean':>6} {np.mean(pos):13.3f} {np.mean(head):19.3f}")
@@ -424,7 +463,7 @@ def main(args) -> int:
     print_scores(result, scores, dataset.name)
     if args.out:
         out = Path(args.out)
-        plot = plot_trajectories(result, dataset, out / f"trajectories_{config.label.replace('+', '_')}.png")
+        plot = plot_trajectories(result, dataset, out / f"trajectories_{plot_name(config.label)}.png")
         (out / "scores.json").write_text(json.dumps(
             {"dataset": dataset.name, "config": config.label, "seed": config.seed,
              "dt_s": config.dt_s, "calibration": config.calibration,
