@@ -436,7 +436,7 @@ SYNTH_MOTION = MotionNoise(speed_fraction=0.1, speed_std_mps=0.005, turn_fractio
 def _run(data, algorithm, cooperative=False, seed=0, params=None, duration_s=None):
     return run_replay(data, ReplayConfig(algorithm=algorithm, cooperative=cooperative, seed=seed,
                                          params=params or {}, motion=SYNTH_MOTION,
-                                         camera=SYNTH_CAMERA, calibration_s=None,
+                                         camera=SYNTH_CAMERA, calibration="none",
                                          duration_s=duration_s))
 
 

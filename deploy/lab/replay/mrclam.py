@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from swarmloc.agents.replay.calibration import SelfCalibratingLocalizer
+from swarmloc.agents.replay.calibration import SelfCalibratingLocalizer, robust_std
 from swarmloc.agents.replay.localizers import (
     ALGORITHMS,
     CameraNoise,
@@ -115,6 +115,10 @@ class ReplayConfig:
                              f"), not {self.algorithm!r} (a single Gaussian cannot start from nowhere)")
         if self.kidnap_s is not None and not (math.isfinite(self.kidnap_s) and self.kidnap_s > 0):
             raise ValueError(f"kidnap_s must be > 0, got {self.kidnap_s!r}")
+        if self.kidnap_s is not None and self.duration_s is not None and \
+                self.kidnap_s >= self.duration_s:
+            raise ValueError(f"kidnap_s ({self.kidnap_s}) must be before the end of the replay "
+                             f"(duration_s {self.duration_s})")
         if self.kidnap_robot is not None and (isinstance(self.kidnap_robot, bool)
                                               or not isinstance(self.kidnap_robot, int)):
             raise ValueError(f"kidnap_robot must be a robot id, got {self.kidnap_robot!r}")
@@ -147,11 +151,6 @@ class ReplayResult:
     def position_error_m(self) -> np.ndarray:
         """(T, N) distance between estimate and truth (NaN where no truth)."""
         return np.linalg.norm(self.estimates[..., :2] - self.truth[..., :2], axis=2)
-
-
-def _robust_std(values: np.ndarray) -> float:
-    """1.4826 times the median absolute deviation (the std of a Gaussian, blind to outliers)."""
-    return float(1.4826 * np.median(np.abs(values - np.median(values))))
 
 
 def _reading_errors(dataset: MrclamDataset, robot_id: int, kind: str, start_s: float,
@@ -205,8 +204,8 @@ def fit_camera(dataset: MrclamDataset, robot_id: int, start_s: float, end_s: flo
         residuals.append(rel[good] - design @ np.array([c0, c2]))
         bearing_errors.append(bearing_err[good])
     if residuals:
-        values["range_fraction"] = _robust_std(np.concatenate(residuals))
-        values["bearing_std_rad"] = max(_robust_std(np.concatenate(bearing_errors)), 1e-3)
+        values["range_fraction"] = robust_std(np.concatenate(residuals))
+        values["bearing_std_rad"] = max(robust_std(np.concatenate(bearing_errors)), 1e-3)
     return replace(base, **values)
 
 
