@@ -164,11 +164,13 @@ def write_report(rows: list[dict], out_dir: str | Path, replay_first=None) -> Pa
         seeds = sorted({r["seed"] for r in mine})
         by_seed = {s: {r["robot"]: r for r in mine if r["seed"] == s} for s in seeds}
         if key[4] is not None:
-            for s in seeds:  # the kidnapped robot is the one with a recovery (or the first)
+            for s in seeds:  # the kidnapped robot: the setting's, else the one that recovered
                 robots = by_seed[s]
-                hit = [rid for rid, r in robots.items() if r["recovery_s"] is not None
-                       and math.isfinite(r["recovery_s"])] or [min(robots)]
-                robots[hit[0]] = {**robots[hit[0]], "kidnapped": True}
+                rid = mine[0].get("kidnap_robot")
+                if rid not in robots:
+                    rid = next((r for r, row in robots.items() if row["recovery_s"] is not None
+                                and math.isfinite(row["recovery_s"])), min(robots))
+                robots[rid] = {**robots[rid], "kidnapped": True}
             kidnap_groups[key] = by_seed
         elif key[3] != "known":
             global_groups[key] = by_seed
@@ -228,6 +230,11 @@ def write_from_args(paths: list[Path], args) -> Path:
     spec = with_overrides(load_spec(args.spec or experiments[0]),
                           fixed=list(getattr(args, "set", None) or []))
     by_id = {s.id: s for s in settings(spec)}
+    for r in rows:  # which robot a kidnap setting kidnaps (not a column of the results)
+        if r.get("kidnap_s") is not None and r["setting"] in by_id:
+            setting = by_id[r["setting"]]
+            scenario = load_replay_scenario(setting.scenario, list(setting.overrides))
+            r["kidnap_robot"] = scenario.config().kidnap_robot
     first_setting = {}
     for r in sorted(rows, key=lambda r: r["seed"]):
         first_setting.setdefault(_key(r), r["setting"])
