@@ -44,17 +44,21 @@ The particle filter and CFS-GA are :mod:`swarmloc.agents.replay.populations`, th
 measurement models, the teammate reports, dead reckoning and the registry.
 
 Every localizer starts from the known initial pose (the data sets' convention for tracking; the
-MRCLAM literature initialises from the first ground-truth pose) with ``initial_std``.
+MRCLAM literature initialises from the first ground-truth pose) with ``initial_std``; or, for
+the population localizers (``pf``, ``cfsga``), from an unknown one: ``LandmarkSetup.initial_area_m``
+(uniform over that area and every heading, issue 19).
 
 Noise parameters. :class:`CameraNoise`'s defaults are the raw camera of
 ``../shared/data/mrclam/SOURCE.md`` (bearing std 0.012-0.016 rad; range error std about 0.18 m
 overall, modelled as 0.02 m + 4 % of the range); most of that range error is a bias that
-depends on the bearing, which :func:`swarmloc.deploy.lab.replay.mrclam.fit_camera` calibrates per robot
-(on the first 120 s of the run against the Vicon ground truth) and
-:meth:`CameraNoise.corrected_range` removes. :class:`MotionNoise`'s defaults follow the
+depends on the bearing, which each robot estimates while it localizes
+(:class:`swarmloc.agents.replay.calibration.SelfCalibratingLocalizer`, no ground truth; or, as a
+reference, :func:`swarmloc.deploy.lab.replay.mrclam.fit_camera` against the Vicon ground truth)
+and :meth:`CameraNoise.corrected_range` removes. :class:`MotionNoise`'s defaults follow the
 commanded-vs-true velocity errors of Dataset 6 (speed error std 0.015-0.02 m/s, turn-rate error
 std 0.08-0.12 rad/s over 0.2 s windows); the filters are insensitive to them within a factor
-of two. Both are thus calibrated on the data the report evaluates on; the report says so.
+of two. The motion noise is thus calibrated on the data the report evaluates on; the report says
+so.
 """
 
 from __future__ import annotations

@@ -8,6 +8,13 @@ ground truth at the same instants. :func:`score` gives per robot the position RM
 over the ticks where ground truth exists (Dataset 6's robot 1 has none after +771.9 s; Vicon
 gaps longer than 0.5 s are skipped). :func:`plot_trajectories` draws estimated vs true paths.
 
+No ground truth in the loop but, with ``start="known"``, the initial pose: each camera's range
+bias is estimated while localizing (``calibration="self"``, the default); ``calibration="vicon"``
+fits it against Vicon (:func:`fit_camera`, a reference), ``"none"`` leaves it. ``start="unknown"``
+starts the population localizers from a uniform belief; ``kidnap_s`` teleports a robot's
+estimate. :func:`score` also times how long a robot takes to be localized (under
+:data:`LOCALIZED_M` to stay) and to recover from the kidnap.
+
 ``swarmloc mrclam PATH`` runs one configuration and prints the table. Every algorithm alone and
 cooperative, the report of ``docs/mrclam/``, is the experiment spec ``mrclam6`` (the replay
 family of the experiment engine, ``deploy/lab/replay/experiment.py``; its report template
