@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -175,5 +176,9 @@ class ReplayService(DrivenRobots):
             return {"ticks": 0}
         truth = self.world.ground_truth()[:k]
         result = ReplayResult(self.config, self.robot_ids, self.world.tick_end_times_s[:k].copy(),
-                              self.estimates[:k], truth, 0.0)
-        return {"ticks": k, "robots": {str(rid): s for rid, s in score(result).items()}}
+                              self.estimates[:k], truth, 0.0, kidnap=self.world.kidnap_tick)
+        # The metrics are finite numbers: a score that does not exist (never localized, no
+        # kidnap) is left out.
+        return {"ticks": k, "robots": {str(rid): {key: v for key, v in s.items()
+                                                  if math.isfinite(v)}
+                                       for rid, s in score(result).items()}}
