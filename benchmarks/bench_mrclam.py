@@ -2,8 +2,10 @@
 
 Prints the process CPU time (``time.process_time``: wall time is noisy on a shared machine) of
 loading the data set, and of replaying all of it at the default 0.02 s tick (45,000 ticks) with
-each localizer alone and cooperative, plus the mean position RMSE so that a speed-up that breaks
-the filter shows. Target of the issue: the particle filter with five robots under 60 s.
+each localizer alone and cooperative (the particle filter and CFS-GA also from an unknown start,
+issue 19), with the default self-calibrating camera, plus the mean position RMSE so that a
+speed-up that breaks the filter shows. Target of the issues: the particle filter with five robots
+under 60 s, known and unknown start.
 One core: BLAS is limited to one thread before numpy loads.
 
 Usage: python benchmarks/bench_mrclam.py [DATASET_FOLDER] [ALGORITHM ...]
@@ -18,13 +20,14 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("MKL_NUM_THREADS", "1")
 
+import itertools
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-from swarmloc.deploy.lab.replay.mrclam import ReplayConfig, run_replay, score
+from swarmloc.deploy.lab.replay.mrclam import GLOBAL_ALGORITHMS, ReplayConfig, run_replay, score
 from swarmloc.world.replay.mrclam import load_dataset
 
 DEFAULT = Path(__file__).resolve().parents[1].parent / "shared/data/mrclam/MRCLAM_Dataset6"
@@ -42,12 +45,16 @@ def main(argv: list[str]) -> int:
     print(f"load {dataset.name}: {time.process_time() - t0:.2f} s CPU")
     failed = False
     for algorithm in algorithms:
-        for cooperative in (False, True):
-            config = ReplayConfig(algorithm=algorithm, cooperative=cooperative)
+        starts = [("known", {})]
+        if algorithm in GLOBAL_ALGORITHMS:  # and from nowhere (the PF with its recovery)
+            starts.append(("unknown", {"recovery": True} if algorithm == "pf" else {}))
+        for (start, params), cooperative in itertools.product(starts, (False, True)):
+            config = ReplayConfig(algorithm=algorithm, cooperative=cooperative, start=start,
+                                  params=params)
             result = run_replay(dataset, config)
             rmse = np.mean([s["position_rmse_m"] for s in score(result).values()])
             ticks = len(result.times_s)
-            line = (f"{config.label:11s} {len(result.robot_ids)} robots x {ticks} ticks "
+            line = (f"{config.label:25s} {len(result.robot_ids)} robots x {ticks} ticks "
                     f"({result.times_s[-1] - result.times_s[0] + config.dt_s:.0f} s): "
                     f"{result.cpu_s:6.1f} s CPU ({result.cpu_s / ticks * 1e3:.2f} ms/tick), "
                     f"mean position RMSE {rmse:.3f} m")

@@ -66,7 +66,8 @@ def test_list_shows_every_shipped_spec_of_every_family(capsys):
     assert set(listed) == set(shipped_specs())
     assert {f for f, _ in listed.values()} == {"epuck", "laser", "vision", "replay"}
     assert listed["vision"] == ("vision", 3 * 2 * 30 + 3 * 10 + 10)
-    assert listed["mrclam6"] == ("replay", 2 * 2 * 1 + 2 * 2 * 3)
+    assert listed["mrclam6"] == ("replay", 2 * 20 + 2 * 20 + 2 * 2 * 1 + 2 * 3 + 2 * 3
+                                 + 2 * 2 * 3 + 2 * 2 * 2 * 1)
     assert cli_main(["experiment", "--list"]) == 0
     out = capsys.readouterr().out
     for name in shipped_specs():

@@ -147,16 +147,23 @@ def test_dataset6_dead_reckoning_matches_source(dataset6):
 
 
 @needs_dataset6
-def test_dataset6_ekf_beats_dead_reckoning_and_cooperation_helps(dataset6):
-    """First 120 s: the EKF halves dead reckoning's error for every robot; cooperative, every
-    robot is within the issue's target (0.15 m) and the mean is no worse than alone."""
-    first = {"duration_s": 120.0}
+@pytest.mark.parametrize("calibration, gain, worst_coop_m", [("vicon", 0.5, 0.15),
+                                                             ("self", 0.6, 0.2)])
+def test_dataset6_ekf_beats_dead_reckoning_and_cooperation_helps(dataset6, calibration, gain,
+                                                                  worst_coop_m):
+    """First 120 s. With the camera fitted against Vicon on those 120 s: the EKF halves dead
+    reckoning's error for every robot; cooperative, every robot is within the issue's target
+    (0.15 m) and the mean is no worse than alone. Self-calibrated (no ground truth but the
+    initial pose), the calibration is still converging over those 120 s and robot 2 reads no
+    landmark from 30 to 60 s: the EKF cuts dead reckoning's error by 40 %, cooperative every
+    robot within 0.2 m, and the mean no worse than alone."""
+    first = {"duration_s": 120.0, "calibration": calibration}
     dr = score(run_replay(dataset6, ReplayConfig(algorithm="dr", dt_s=0.1, **first)))
     alone = score(run_replay(dataset6, ReplayConfig(algorithm="ekf", **first)))
     coop = score(run_replay(dataset6, ReplayConfig(algorithm="ekf", cooperative=True, **first)))
     for rid in dataset6.robot_ids:
-        assert alone[rid]["position_rmse_m"] < 0.5 * dr[rid]["position_rmse_m"]
-        assert coop[rid]["position_rmse_m"] < 0.15
+        assert alone[rid]["position_rmse_m"] < gain * dr[rid]["position_rmse_m"]
+        assert coop[rid]["position_rmse_m"] < worst_coop_m
     mean = lambda s: np.mean([v["position_rmse_m"] for v in s.values()])
     assert mean(coop) <= mean(alone)
 
@@ -436,7 +443,7 @@ SYNTH_MOTION = MotionNoise(speed_fraction=0.1, speed_std_mps=0.005, turn_fractio
 def _run(data, algorithm, cooperative=False, seed=0, params=None, duration_s=None):
     return run_replay(data, ReplayConfig(algorithm=algorithm, cooperative=cooperative, seed=seed,
                                          params=params or {}, motion=SYNTH_MOTION,
-                                         camera=SYNTH_CAMERA, calibration_s=None,
+                                         camera=SYNTH_CAMERA, calibration="none",
                                          duration_s=duration_s))
 
 

@@ -44,17 +44,21 @@ The particle filter and CFS-GA are :mod:`swarmloc.agents.replay.populations`, th
 measurement models, the teammate reports, dead reckoning and the registry.
 
 Every localizer starts from the known initial pose (the data sets' convention for tracking; the
-MRCLAM literature initialises from the first ground-truth pose) with ``initial_std``.
+MRCLAM literature initialises from the first ground-truth pose) with ``initial_std``; or, for
+the population localizers (``pf``, ``cfsga``), from an unknown one: ``LandmarkSetup.initial_area_m``
+(uniform over that area and every heading, issue 19).
 
 Noise parameters. :class:`CameraNoise`'s defaults are the raw camera of
 ``../shared/data/mrclam/SOURCE.md`` (bearing std 0.012-0.016 rad; range error std about 0.18 m
 overall, modelled as 0.02 m + 4 % of the range); most of that range error is a bias that
-depends on the bearing, which :func:`swarmloc.deploy.lab.replay.mrclam.fit_camera` calibrates per robot
-(on the first 120 s of the run against the Vicon ground truth) and
-:meth:`CameraNoise.corrected_range` removes. :class:`MotionNoise`'s defaults follow the
+depends on the bearing, which each robot estimates while it localizes
+(:class:`swarmloc.agents.replay.calibration.SelfCalibratingLocalizer`, no ground truth; or, as a
+reference, :func:`swarmloc.deploy.lab.replay.mrclam.fit_camera` against the Vicon ground truth)
+and :meth:`CameraNoise.corrected_range` removes. :class:`MotionNoise`'s defaults follow the
 commanded-vs-true velocity errors of Dataset 6 (speed error std 0.015-0.02 m/s, turn-rate error
 std 0.08-0.12 rad/s over 0.2 s windows); the filters are insensitive to them within a factor
-of two. Both are thus calibrated on the data the report evaluates on; the report says so.
+of two. The motion noise is thus calibrated on the data the report evaluates on; the report says
+so.
 """
 
 from __future__ import annotations
@@ -213,6 +217,10 @@ class LandmarkSetup:
     #: Where hypotheses may be drawn (random particles/individuals): x_min, y_min, x_max, y_max.
     #: Default: the landmarks' bounding box grown by 2 m.
     bounds_m: tuple[float, float, float, float] | None = None
+    #: Unknown start: the initial hypotheses are drawn uniformly over this area (x_min, y_min,
+    #: x_max, y_max) and every heading, and ``initial_pose``/``initial_std`` are not used (only
+    #: the population localizers can; None: the known start).
+    initial_area_m: tuple[float, float, float, float] | None = None
 
     def __post_init__(self):
         if isinstance(self.robot_id, bool) or not isinstance(self.robot_id, (int, np.integer)):
@@ -240,6 +248,13 @@ class LandmarkSetup:
         elif len(self.bounds_m) != 4 or not (self.bounds_m[2] > self.bounds_m[0]
                                              and self.bounds_m[3] > self.bounds_m[1]):
             raise ValueError(f"bounds_m must be (x_min, y_min, x_max, y_max), got {self.bounds_m!r}")
+        if self.initial_area_m is not None:
+            area = tuple(float(v) for v in self.initial_area_m)
+            if len(area) != 4 or not all(map(math.isfinite, area)) or \
+                    not (area[2] > area[0] and area[3] > area[1]):
+                raise ValueError(f"initial_area_m must be (x_min, y_min, x_max, y_max), got "
+                                 f"{self.initial_area_m!r}")
+            object.__setattr__(self, "initial_area_m", area)
         object.__setattr__(self, "landmark_ids", ids)
         object.__setattr__(self, "landmark_xy_m", xy)
         object.__setattr__(self, "initial_pose", pose)
@@ -256,7 +271,20 @@ class LandmarkSetup:
         return xy, known
 
     def initial_covariance(self) -> np.ndarray:
+        if self.initial_area_m is not None:  # the uniform's covariance
+            x0, y0, x1, y1 = self.initial_area_m
+            return np.diag([(x1 - x0) ** 2 / 12.0, (y1 - y0) ** 2 / 12.0, math.pi**2 / 3.0])
         return np.diag(np.square(np.asarray(self.initial_std, dtype=np.float64)))
+
+    def initial_hypotheses(self, n: int, rng: np.random.Generator) -> np.ndarray:
+        """``(n, 3)`` initial poses: around the known pose with ``initial_std``, or, for an
+        unknown start, uniform over ``initial_area_m`` and every heading."""
+        if self.initial_area_m is not None:
+            x0, y0, x1, y1 = self.initial_area_m
+            return rng.uniform([x0, y0, -math.pi], [x1, y1, math.pi], size=(n, 3))
+        out = self.initial_pose + rng.normal(size=(n, 3)) * np.asarray(self.initial_std)
+        out[:, 2] = wrap_angle(out[:, 2])
+        return out
 
 
 @runtime_checkable

@@ -139,10 +139,64 @@ class PfParams:
     #: (``amcl`` resamples every ``resample_interval`` updates; with 0.02 s ticks and a few
     #: readings per second the ESS rule spares needless resampling noise).
     resample_ess_fraction: float = 0.5
+    #: With ``recovery``: draw the injected particles from the poses that explain one of the
+    #: tick's landmark readings (:func:`sensor_resetting_poses`) instead of uniformly over the
+    #: area (when the tick had none: uniformly).
+    sensor_resetting: bool = True
+    #: Sensor resetting (with ``recovery`` and ``sensor_resetting``): the likelihood of each
+    #: reading, averaged over the particles, relative to its peak (the likelihood of a reading
+    #: that fits exactly), smoothed over readings with weight ``reset_smoothing``; while it is
+    #: below ``reset_threshold`` a fraction ``1 - fit / reset_threshold`` of the particles is
+    #: replaced by poses drawn from the tick's readings (Lenser and Veloso 2000). A pose that
+    #: fits a reading within one std in range and bearing scores ``exp(-1) = 0.37``.
+    reset_threshold: float = 0.02
+    reset_smoothing: float = 0.3
 
     def __post_init__(self):
         if not 0.0 < _real(self.resample_ess_fraction, "resample_ess_fraction") <= 1.0:
             raise ValueError(f"resample_ess_fraction must be in (0, 1], got {self.resample_ess_fraction}")
+        if not isinstance(self.sensor_resetting, bool):
+            raise TypeError(f"sensor_resetting must be true or false, got {self.sensor_resetting!r}")
+        if not 0.0 <= _real(self.reset_threshold, "reset_threshold") < 1.0:
+            raise ValueError(f"reset_threshold must be in [0, 1), got {self.reset_threshold}")
+        if not 0.0 < _real(self.reset_smoothing, "reset_smoothing") <= 1.0:
+            raise ValueError(f"reset_smoothing must be in (0, 1], got {self.reset_smoothing}")
+
+
+def sensor_resetting_poses(n: int, rng: np.random.Generator, landmarks_xy: np.ndarray,
+                           range_m: np.ndarray, bearing_rad: np.ndarray, camera: CameraNoise,
+                           bounds_m: tuple[float, float, float, float] | None = None) -> np.ndarray:
+    """``(n, 3)`` poses drawn from what one landmark reading says (sensor resetting, Lenser and
+    Veloso 2000): for each pose a reading ``k`` chosen at random, the direction ``phi`` from the
+    robot to the landmark uniform, the range and bearing drawn from the camera's noise; the
+    robot then stands at ``l_k - r (cos, sin)(phi)`` with heading ``phi - b``.
+
+    Our choice for the landmark PF's recovery: one known landmark's reading puts the robot on a
+    circle with a known heading along it, a set of three dimensions cut to one; AMCL's uniform
+    draw (seed 003 §II) would hit it once in about a thousand particles on Dataset 6's field.
+    With ``bounds_m`` the poses outside are drawn again (up to four rounds; then kept)."""
+    out = _reading_poses(n, rng, landmarks_xy, range_m, bearing_rad, camera)
+    if bounds_m is not None:
+        x0, y0, x1, y1 = bounds_m
+        for _ in range(4):
+            outside = (out[:, 0] < x0) | (out[:, 0] > x1) | (out[:, 1] < y0) | (out[:, 1] > y1)
+            if not outside.any():
+                break
+            out[outside] = _reading_poses(int(outside.sum()), rng, landmarks_xy, range_m,
+                                          bearing_rad, camera)
+    return out
+
+
+def _reading_poses(n, rng, landmarks_xy, range_m, bearing_rad, camera) -> np.ndarray:
+    k = rng.integers(0, range_m.size, size=n)
+    phi = rng.uniform(-math.pi, math.pi, size=n)
+    r = np.maximum(range_m[k] + rng.normal(size=n) * camera.range_std(range_m[k]), 0.0)
+    b = bearing_rad[k] + rng.normal(size=n) * camera.bearing_std_rad
+    out = np.empty((n, 3))
+    out[:, 0] = landmarks_xy[k, 0] - r * np.cos(phi)
+    out[:, 1] = landmarks_xy[k, 1] - r * np.sin(phi)
+    out[:, 2] = wrap_angle(phi - b)
+    return out
 
 
 #: Defaults of the AMCL core for MRCLAM (others are ``AMCLParams``' own): a tracking filter
@@ -181,6 +235,9 @@ class ParticleFilterLocalizer:
         low, high = np.array([x0, y0, -math.pi]), np.array([x1, y1, math.pi])
 
         def sample_area(n: int, generator: np.random.Generator) -> np.ndarray:
+            if self.params.sensor_resetting and self._last_readings is not None:
+                return sensor_resetting_poses(n, generator, *self._last_readings, setup.camera,
+                                              setup.bounds_m)
             return generator.uniform(low, high, size=(n, 3))
 
         # Motion noise per second at the typical command; the per-tick std is this times
@@ -188,17 +245,22 @@ class ParticleFilterLocalizer:
         self._per_second = setup.motion.tick_std(setup.motion.typical_v_mps,
                                                  setup.motion.typical_omega_rad_s, 1.0)
         n = self.amcl_params.max_particles
-        initial = setup.initial_pose + rng.normal(size=(n, 3)) * np.asarray(setup.initial_std)
-        initial[:, 2] = wrap_angle(initial[:, 2])
+        initial = setup.initial_hypotheses(n, rng)
         self._make = lambda motion_std, particles: AugmentedMCL(
             self.amcl_params, rng, sample_area, motion_std, initial_particles=particles)
         self.filter = None
         self._dt = None
         self._initial = initial
+        #: The landmark readings of the last tick that had some (the recovery's sampler).
+        self._last_readings = None
         self._pose = setup.initial_pose.copy()
         self._cov = setup.initial_covariance()
         self.coop = _Cooperation(setup)
         self.updates = 0
+        #: Sensor resetting: the smoothed fit of the readings (see :class:`PfParams`), and how
+        #: many particles were replaced so far.
+        self.fit = 1.0 if setup.initial_area_m is None else 0.0
+        self.resets = 0
 
     def _core(self, dt_s: float):
         """The AMCL core; its per-step motion noise is fixed when it is built, so it is built
@@ -234,12 +296,23 @@ class ParticleFilterLocalizer:
             if known.any():
                 lm_xy, rng_m = xy[known], obs.landmark_range_m[known]
                 bearing = obs.landmark_bearing_rad[known]
+                self._last_readings = (lm_xy, rng_m, bearing)
                 # One correction per reading: the recovery averages (w_slow, w_fast) then
                 # compare likelihoods of one reading each, not of frames with 1 or 4 readings.
+                resetting = self.amcl_params.recovery and self.params.sensor_resetting
                 for k in range(lm_xy.shape[0]):
-                    core.correct(lambda p, k=k: landmark_log_likelihood(
+                    log_w_avg = core.correct(lambda p, k=k: landmark_log_likelihood(
                         p, lm_xy[k:k + 1], rng_m[k:k + 1], bearing[k:k + 1], camera,
                         self._log_uniform_reading))
+                    if resetting:
+                        peak = -math.log(TWO_PI * float(camera.range_std(rng_m[k]))
+                                         * camera.bearing_std_rad)
+                        a = self.params.reset_smoothing
+                        self.fit = (1 - a) * self.fit + a * math.exp(min(log_w_avg - peak, 0.0))
+                if resetting and self.fit < self.params.reset_threshold:
+                    n_reset = int(core.n_particles * (1.0 - self.fit / self.params.reset_threshold))
+                    self.resets += core.replace_random(n_reset, lambda n, g: sensor_resetting_poses(
+                        n, g, lm_xy, rng_m, bearing, camera, setup.bounds_m))
             for reading in readings:
                 core.reweight(_mixture(
                     teammate_log_density(core.particles, reading, self._pose, self._cov, camera),
@@ -335,8 +408,7 @@ class CfsgaLocalizer:
         x0, y0, x1, y1 = setup.bounds_m
         diagonal = math.hypot(x1 - x0, y1 - y0)
         m = self.ga_params.population_size
-        initial = setup.initial_pose + rng.normal(size=(m, 3)) * np.asarray(setup.initial_std)
-        initial[:, 2] = wrap_angle(initial[:, 2])
+        initial = setup.initial_hypotheses(m, rng)
         self.ga = FitnessSharingGA(self.ga_params, self.ga_params.niche_radius_fraction * diagonal,
                                    box_sampler(setup.bounds_m), rng, initial_population=initial)
         self._pose = setup.initial_pose.copy()

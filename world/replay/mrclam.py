@@ -306,6 +306,14 @@ def load_dataset(folder: str | Path, name: str | None = None) -> MrclamDataset:
     if clash:
         raise MrclamFormatError(
             f"{path.name}: subject {min(clash)} is both a landmark and a robot (Robot{min(clash)}_*)")
+    # A robot of Barcodes.dat (a subject that is not a landmark) without its files: a data set
+    # with a robot missing (the robots' ids are 1..N in every MRCLAM data set).
+    missing_robots = sorted(set(barcodes) - set(landmark_ids.tolist()) - set(robot_files))
+    if missing_robots:
+        raise MrclamFormatError(
+            f"{folder} is not a complete MRCLAM data set: missing file "
+            f"Robot{missing_robots[0]}_Groundtruth.dat (robot {missing_robots[0]} is in "
+            f"Barcodes.dat)")
 
     raw: dict[int, dict[str, np.ndarray]] = {}
     for robot_id in sorted(robot_files):

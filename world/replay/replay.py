@@ -138,7 +138,8 @@ class ReplayWorld:
 
     def __init__(self, dataset: MrclamDataset, dt_s: float = DEFAULT_DT_S, *,
                  start_s: float | None = None, end_s: float | None = None,
-                 odometry_hold_s: float = DEFAULT_ODOMETRY_HOLD_S):
+                 odometry_hold_s: float = DEFAULT_ODOMETRY_HOLD_S,
+                 kidnap: tuple[int, float, tuple[float, float]] | None = None):
         self.dataset = dataset
         self.dt_s = _check_positive(dt_s, "dt_s")
         hold = _check_positive(odometry_hold_s, "odometry_hold_s")
@@ -163,8 +164,28 @@ class ReplayWorld:
                                 (self._robots, rec.robot_measurements)):
                 store.append(_Schedule(meas.time_s, meas.subject, meas.range_m, meas.bearing_rad,
                                        self.start_s, self.dt_s, self.n_ticks))
+        #: ``(robot id, tick)`` of the kidnap, or None.
+        self.kidnap_tick: tuple[int, int] | None = None
+        if kidnap is not None:
+            self._kidnap(*kidnap)
         self.tick = 0
         self._inbox: dict[int, tuple[Message, ...]] = {rid: () for rid in self.robot_ids}
+
+    def _kidnap(self, robot_id: int, time_s: float, jump: tuple[float, float]) -> None:
+        """Kidnap the estimate of ``robot_id`` at the tick that ends at or after ``time_s``: its
+        odometry of that tick also says it drove ``jump = (distance_m, turn_rad)`` (the robot
+        did not move; every localizer applies it as motion, so its estimate is teleported)."""
+        if robot_id not in self.robot_ids:
+            raise ValueError(f"kidnap: no robot {robot_id!r} in this replay (robots {self.robot_ids})")
+        k = int(np.searchsorted(self.boundaries_s[1:], time_s - 1e-9))
+        if k >= self.n_ticks:
+            raise ValueError(f"kidnap: time {time_s} s is after the replay's end "
+                             f"({self.boundaries_s[-1]} s)")
+        i = self.robot_ids.index(robot_id)
+        distance_m, turn_rad = jump
+        self._v[i][k] += distance_m / self.dt_s
+        self._omega[i][k] += turn_rad / self.dt_s
+        self.kidnap_tick = (robot_id, k)
 
     @property
     def done(self) -> bool:

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -44,7 +45,11 @@ class ReplayScenario:
     seed: int = 0
     dt_s: float = 0.02
     duration_s: float | None = None
+    calibration: str = "self"
     calibration_s: float | None = 120.0
+    start: str = "known"
+    kidnap_s: float | None = None
+    kidnap_robot: int | None = None
     params: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -60,7 +65,9 @@ class ReplayScenario:
 
         return ReplayConfig(algorithm=self.algorithm, cooperative=self.cooperative, seed=self.seed,
                             dt_s=self.dt_s, params=dict(self.params), duration_s=self.duration_s,
-                            calibration_s=self.calibration_s)
+                            calibration=self.calibration, calibration_s=self.calibration_s,
+                            start=self.start, kidnap_s=self.kidnap_s,
+                            kidnap_robot=self.kidnap_robot)
 
     @functools.cached_property
     def world(self):  # what the process commands read: seed, robot count, ticks
@@ -169,5 +176,9 @@ class ReplayService(DrivenRobots):
             return {"ticks": 0}
         truth = self.world.ground_truth()[:k]
         result = ReplayResult(self.config, self.robot_ids, self.world.tick_end_times_s[:k].copy(),
-                              self.estimates[:k], truth, 0.0)
-        return {"ticks": k, "robots": {str(rid): s for rid, s in score(result).items()}}
+                              self.estimates[:k], truth, 0.0, kidnap=self.world.kidnap_tick)
+        # The metrics are finite numbers: a score that does not exist (never localized, no
+        # kidnap) is left out.
+        return {"ticks": k, "robots": {str(rid): {key: v for key, v in s.items()
+                                                  if math.isfinite(v)}
+                                       for rid, s in score(result).items()}}

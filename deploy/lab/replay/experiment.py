@@ -3,14 +3,16 @@
 A spec with ``family = "replay"`` (shipped: ``deploy/experiments/mrclam6.toml``, the report of
 ``docs/mrclam/``) names replay scenarios (``deploy/scenarios/replay/``, flat tables of
 :class:`~swarmloc.world.replay.service.ReplayScenario`: ``dataset``, ``algorithm``,
-``cooperative``, ``dt_s``, ``duration_s``, ``calibration_s``, ``params``) and a grid of their
+``cooperative``, ``calibration``, ``start``, ``kidnap_s``, ``dt_s``, ``duration_s``,
+``calibration_s``, ``params``) and a grid of their
 keys (``algorithm = ["pf", "cfsga"]``); replication ``r`` runs with ``seed = spec seed + r`` (the
 localizers' generators ``[seed, 7, robot]``). One job replays the whole data set through one
 localizer per robot (:func:`~swarmloc.deploy.lab.replay.mrclam.run_replay`) and scores each robot
 against the Vicon ground truth (:func:`~swarmloc.deploy.lab.replay.mrclam.score`); its rows
 (:func:`rows`, one per robot, written in one call) are the setting (experiment, group, setting,
 scenario, dataset, algorithm, cooperative, dt_s, seed, replication, one column per grid key), the
-robot and its scores, cpu_s (the replay loop), wall_s and config_hash.
+robot and its scores (with the time until localized, the RMSE after and a kidnap's recovery
+time), cpu_s (the replay loop), wall_s and config_hash.
 
 The data set is not part of the repository: ``dataset`` is a folder (relative to the working
 directory), ``../shared/data/mrclam/MRCLAM_Dataset6`` in the shipped scenario and spec; elsewhere
@@ -33,9 +35,13 @@ from swarmloc.deploy.lab.experiment import ExperimentSpec, Job, Setting, setting
 #: The replication's seed is this scenario key.
 SEED_KEY = "seed"
 LEAD_COLUMNS = ("experiment", "group", "setting", "scenario", "dataset", "algorithm",
-                "cooperative", "dt_s", "seed", "replication")
+                "cooperative", "calibration", "start", "kidnap_s", "dt_s", "seed", "replication")
 METRIC_COLUMNS = ("robot", "position_rmse_m", "heading_rmse_rad", "final_error_m",
-                  "scored_ticks", "cpu_s", "wall_s", "config_hash")
+                  "scored_ticks", "localized_s", "rmse_localized_m", "recovery_s", "cpu_s",
+                  "wall_s", "config_hash")
+#: What a job reports of its configuration (the lead columns it fills).
+_CONFIG_COLUMNS = ("dataset", "algorithm", "cooperative", "calibration", "start", "kidnap_s",
+                   "dt_s")
 #: Relative CPU per tick of each localizer (the plan's progress weights; measured on Dataset 6).
 _COST = {"dr": 1, "ekf": 2, "pf": 6, "cfsga": 6}
 
@@ -114,7 +120,8 @@ def run_job(job: Job) -> dict:
     config = scenario.config()
     result = run_replay(dataset, config)
     return {"dataset": dataset.name, "algorithm": config.algorithm,
-            "cooperative": config.cooperative, "dt_s": config.dt_s,
+            "cooperative": config.cooperative, "calibration": config.calibration,
+            "start": config.start, "kidnap_s": config.kidnap_s, "dt_s": config.dt_s,
             "scores": {int(rid): sc for rid, sc in score(result).items()},
             "cpu_s": round(result.cpu_s, 1), "wall_s": round(time.perf_counter() - t0, 3)}
 
@@ -124,7 +131,7 @@ def rows(spec: ExperimentSpec, job: Job, out: dict) -> list[list]:
     grid = dict(job.grid)
     lead = {"experiment": spec.name, "group": job.group, "setting": job.setting,
             "scenario": job.scenario, "seed": job.seed, "replication": job.replication,
-            **{k: out[k] for k in ("dataset", "algorithm", "cooperative", "dt_s")}}
+            **{k: out[k] for k in _CONFIG_COLUMNS}}
     lines = []
     for rid, sc in out["scores"].items():
         values = {"robot": rid, **sc,

@@ -8,6 +8,13 @@ ground truth at the same instants. :func:`score` gives per robot the position RM
 over the ticks where ground truth exists (Dataset 6's robot 1 has none after +771.9 s; Vicon
 gaps longer than 0.5 s are skipped). :func:`plot_trajectories` draws estimated vs true paths.
 
+No ground truth in the loop but, with ``start="known"``, the initial pose: each camera's range
+bias is estimated while localizing (``calibration="self"``, the default); ``calibration="vicon"``
+fits it against Vicon (:func:`fit_camera`, a reference), ``"none"`` leaves it. ``start="unknown"``
+starts the population localizers from a uniform belief; ``kidnap_s`` teleports a robot's
+estimate. :func:`score` also times how long a robot takes to be localized (under
+:data:`LOCALIZED_M` to stay) and to recover from the kidnap.
+
 ``swarmloc mrclam PATH`` runs one configuration and prints the table. Every algorithm alone and
 cooperative, the report of ``docs/mrclam/``, is the experiment spec ``mrclam6`` (the replay
 family of the experiment engine, ``deploy/lab/replay/experiment.py``; its report template
@@ -32,6 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
+from swarmloc.agents.replay.calibration import SelfCalibratingLocalizer, robust_std
 from swarmloc.agents.replay.localizers import (
     ALGORITHMS,
     CameraNoise,
@@ -47,6 +55,16 @@ from swarmloc.world.replay.replay import DEFAULT_DT_S, ReplayWorld
 MRCLAM_STREAM = 7
 #: The report's line-up, in table order.
 REPORT_ALGORITHMS = ("dr", "ekf", "pf", "cfsga")
+#: ``ReplayConfig.calibration``: self (no ground truth), the Vicon fit (reference), none.
+CALIBRATIONS = ("self", "vicon", "none")
+#: ``ReplayConfig.start``.
+STARTS = ("known", "unknown")
+#: The localizers that can start from an unknown pose (a population over the whole field).
+GLOBAL_ALGORITHMS = ("pf", "cfsga")
+#: A kidnap's jump told by the odometry: (distance m along the mid-turn heading, turn rad).
+KIDNAP_JUMP = (2.0, math.pi / 2)
+#: Error below which a robot counts as localized (issue 19: 0.3 m, and it must stay there).
+LOCALIZED_M = 0.3
 
 
 @dataclass(frozen=True)
@@ -63,9 +81,24 @@ class ReplayConfig:
     initial_std: tuple[float, float, float] = (0.05, 0.05, 0.05)
     #: Replay only this many seconds from the start (None: the whole data set).
     duration_s: float | None = None
-    #: Calibrate each robot's camera (:func:`fit_camera`) on its first ``calibration_s`` seconds
-    #: of readings against the ground truth; None: use ``camera`` as it is.
+    #: How each robot's camera range bias is found (:data:`CALIBRATIONS`): ``self``, estimated
+    #: while localizing from the robot's own data
+    #: (:class:`~swarmloc.agents.replay.calibration.SelfCalibratingLocalizer`, no ground truth);
+    #: ``vicon``, fitted (:func:`fit_camera`) on the first ``calibration_s`` seconds of readings
+    #: against the Vicon ground truth (a reference: ground truth in the loop); ``none``: ``camera``
+    #: as it is.
+    calibration: str = "self"
+    #: The Vicon fit's window (``calibration="vicon"`` only; None or 0: no fit).
     calibration_s: float | None = 120.0
+    #: ``known``: every localizer starts at the robot's first Vicon pose with ``initial_std``;
+    #: ``unknown``: no knowledge of the pose (uniform over the landmarks' bounding box, every
+    #: heading), for the global localizers only (:data:`GLOBAL_ALGORITHMS`).
+    start: str = "known"
+    #: Kidnap: ``kidnap_s`` seconds after the start, robot ``kidnap_robot`` (a data set id; None:
+    #: the first) is told by its odometry that it jumped ``KIDNAP_JUMP`` (its estimate is
+    #: teleported; the robot did not move). None: no kidnap.
+    kidnap_s: float | None = None
+    kidnap_robot: int | None = None
 
     def __post_init__(self):
         if self.algorithm not in ALGORITHMS:
@@ -76,10 +109,38 @@ class ReplayConfig:
             raise TypeError(f"cooperative must be true or false, got {self.cooperative!r}")
         if self.duration_s is not None and not (math.isfinite(self.duration_s) and self.duration_s > 0):
             raise ValueError(f"duration_s must be > 0, got {self.duration_s!r}")
+        if self.calibration not in CALIBRATIONS:
+            raise ValueError(f"calibration: unknown {self.calibration!r} (known: "
+                             f"{', '.join(CALIBRATIONS)})")
+        if self.calibration_s is not None and not (math.isfinite(self.calibration_s)
+                                                   and self.calibration_s >= 0):
+            raise ValueError(f"calibration_s must be >= 0, got {self.calibration_s!r}")
+        if self.start not in STARTS:
+            raise ValueError(f"start: unknown {self.start!r} (known: {', '.join(STARTS)})")
+        if self.start == "unknown" and self.algorithm not in GLOBAL_ALGORITHMS:
+            raise ValueError(f"start: 'unknown' needs a global localizer ({', '.join(GLOBAL_ALGORITHMS)}"
+                             f"), not {self.algorithm!r} (a single Gaussian cannot start from nowhere)")
+        if self.kidnap_s is not None and not (math.isfinite(self.kidnap_s) and self.kidnap_s > 0):
+            raise ValueError(f"kidnap_s must be > 0, got {self.kidnap_s!r}")
+        if self.kidnap_s is not None and self.duration_s is not None and \
+                self.kidnap_s >= self.duration_s:
+            raise ValueError(f"kidnap_s ({self.kidnap_s}) must be before the end of the replay "
+                             f"(duration_s {self.duration_s})")
+        if self.kidnap_robot is not None and (isinstance(self.kidnap_robot, bool)
+                                              or not isinstance(self.kidnap_robot, int)):
+            raise ValueError(f"kidnap_robot must be a robot id, got {self.kidnap_robot!r}")
 
     @property
     def label(self) -> str:
-        return f"{self.algorithm}{'+coop' if self.cooperative else ''}"
+        """``algorithm[+coop]``, then what differs from the default tracking run."""
+        tags = [f"{self.algorithm}{'+coop' if self.cooperative else ''}"]
+        if self.calibration != "self":
+            tags.append(f"{self.calibration}-cal")
+        if self.start != "known":
+            tags.append(f"{self.start}-start")
+        if self.kidnap_s is not None:
+            tags.append("kidnap")
+        return " ".join(tags)
 
 
 @dataclass(frozen=True)
@@ -91,15 +152,12 @@ class ReplayResult:
     truth: np.ndarray  #: (T, N, 3), NaN where unknown
     cpu_s: float  #: process CPU time of the replay loop
     rejected_payloads: int = 0
+    #: ``(robot id, tick)`` of the kidnap, or None.
+    kidnap: tuple[int, int] | None = None
 
     def position_error_m(self) -> np.ndarray:
         """(T, N) distance between estimate and truth (NaN where no truth)."""
         return np.linalg.norm(self.estimates[..., :2] - self.truth[..., :2], axis=2)
-
-
-def _robust_std(values: np.ndarray) -> float:
-    """1.4826 times the median absolute deviation (the std of a Gaussian, blind to outliers)."""
-    return float(1.4826 * np.median(np.abs(values - np.median(values))))
 
 
 def _reading_errors(dataset: MrclamDataset, robot_id: int, kind: str, start_s: float,
@@ -153,8 +211,8 @@ def fit_camera(dataset: MrclamDataset, robot_id: int, start_s: float, end_s: flo
         residuals.append(rel[good] - design @ np.array([c0, c2]))
         bearing_errors.append(bearing_err[good])
     if residuals:
-        values["range_fraction"] = _robust_std(np.concatenate(residuals))
-        values["bearing_std_rad"] = max(_robust_std(np.concatenate(bearing_errors)), 1e-3)
+        values["range_fraction"] = robust_std(np.concatenate(residuals))
+        values["bearing_std_rad"] = max(robust_std(np.concatenate(bearing_errors)), 1e-3)
     return replace(base, **values)
 
 
@@ -167,7 +225,14 @@ def replay_world(dataset: MrclamDataset, config: ReplayConfig) -> ReplayWorld:
     end = None
     if config.duration_s is not None:
         end = dataset.time_span_s()[0] + config.duration_s
-    return ReplayWorld(dataset, config.dt_s, end_s=end)
+    kidnap = None
+    if config.kidnap_s is not None:
+        rid = dataset.robot_ids[0] if config.kidnap_robot is None else config.kidnap_robot
+        if rid not in dataset.robot_ids:
+            raise ValueError(f"kidnap_robot: {rid} is not a robot of {dataset.name} "
+                             f"({', '.join(map(str, dataset.robot_ids))})")
+        kidnap = (rid, dataset.time_span_s()[0] + config.kidnap_s, KIDNAP_JUMP)
+    return ReplayWorld(dataset, config.dt_s, end_s=end, kidnap=kidnap)
 
 
 def replay_localizer(dataset: MrclamDataset, world: ReplayWorld, config: ReplayConfig, rid: int,
@@ -177,14 +242,21 @@ def replay_localizer(dataset: MrclamDataset, world: ReplayWorld, config: ReplayC
     if initial_pose is None:
         initial_pose = world.initial_poses()[world.robot_ids.index(rid)]
     camera = config.camera
-    if config.calibration_s is not None:
+    if config.calibration == "vicon" and config.calibration_s:
         camera = fit_camera(dataset, rid, world.start_s, world.start_s + config.calibration_s,
                             camera)
+    unknown = config.start == "unknown"
+    lm = dataset.landmarks.xy_m
     setup = LandmarkSetup(robot_id=rid, landmark_ids=dataset.landmarks.ids,
-                          landmark_xy_m=dataset.landmarks.xy_m, initial_pose=initial_pose,
+                          landmark_xy_m=lm,
+                          initial_pose=lm.mean(axis=0).tolist() + [0.0] if unknown else initial_pose,
                           initial_std=config.initial_std, motion=config.motion,
-                          camera=camera, cooperative=config.cooperative)
-    return build_localizer(config.algorithm, setup, robot_rng(config.seed, rid), config.params)
+                          camera=camera, cooperative=config.cooperative,
+                          initial_area_m=((*lm.min(axis=0), *lm.max(axis=0)) if unknown else None))
+    brain = build_localizer(config.algorithm, setup, robot_rng(config.seed, rid), config.params)
+    if config.calibration == "self":
+        brain = SelfCalibratingLocalizer(brain)
+    return brain
 
 
 def run_replay(dataset: MrclamDataset, config: ReplayConfig) -> ReplayResult:
@@ -209,25 +281,60 @@ def run_replay(dataset: MrclamDataset, config: ReplayConfig) -> ReplayResult:
         world.step(outgoing)
     cpu = time.process_time() - t0
     return ReplayResult(config, world.robot_ids, world.tick_end_times_s.copy(), estimates,
-                        world.ground_truth(), cpu, rejected)
+                        world.ground_truth(), cpu, rejected, world.kidnap_tick)
+
+
+def localized_from(error_m: np.ndarray, threshold_m: float = LOCALIZED_M) -> int | None:
+    """The first tick from which the error (``(T,)``, NaN where unscored) is under
+    ``threshold_m`` at every scored tick to the end; None if the last scored tick is not."""
+    scored = np.flatnonzero(np.isfinite(error_m))
+    if not scored.size:
+        return None
+    bad = scored[error_m[scored] >= threshold_m]
+    if not bad.size:
+        return 0
+    if bad[-1] == scored[-1]:
+        return None
+    return int(bad[-1]) + 1
 
 
 def score(result: ReplayResult) -> dict[int, dict[str, float]]:
-    """Per robot: position RMSE [m], heading RMSE [rad], final position error [m], and the
-    number of ticks scored."""
+    """Per robot: position RMSE [m], heading RMSE [rad], final position error [m], the number
+    of ticks scored; ``localized_s``, the time from the start until the error falls under
+    :data:`LOCALIZED_M` and stays there to the end (NaN: never), and ``rmse_localized_m``, the
+    position RMSE from then on; for the kidnapped robot ``recovery_s``, the same time counted
+    from the kidnap (NaN for the others, or if it never recovers)."""
     out = {}
     err = result.position_error_m()
     heading = wrap_angle(result.estimates[..., 2] - result.truth[..., 2])
+    dt = result.config.dt_s
+    start = result.times_s[0] - dt
     for i, rid in enumerate(result.robot_ids):
         ok = np.isfinite(err[:, i])
         last = np.flatnonzero(ok)[-1] if ok.any() else None
+        k = localized_from(err[:, i])
+        after = err[k:, i][np.isfinite(err[k:, i])] if k is not None else np.zeros(0)
+        recovery = math.nan
+        if result.kidnap is not None and result.kidnap[0] == rid:
+            kk = result.kidnap[1]
+            back = localized_from(err[kk:, i])
+            if back is not None:
+                recovery = float(result.times_s[kk + back] - result.times_s[kk])
         out[rid] = {
             "position_rmse_m": float(np.sqrt(np.mean(err[ok, i] ** 2))) if ok.any() else math.nan,
             "heading_rmse_rad": float(np.sqrt(np.mean(heading[ok, i] ** 2))) if ok.any() else math.nan,
             "final_error_m": float(err[last, i]) if last is not None else math.nan,
             "scored_ticks": int(ok.sum()),
+            "localized_s": float(result.times_s[k] - dt - start) if k is not None else math.nan,
+            "rmse_localized_m": float(np.sqrt(np.mean(after**2))) if after.size else math.nan,
+            "recovery_s": recovery,
         }
     return out
+
+
+def plot_name(label: str) -> str:
+    """A configuration's label as a file name part."""
+    return label.replace("+", "_").replace(" ", "_")
 
 
 def plot_trajectories(result: ReplayResult, dataset: MrclamDataset, path: Path,
@@ -278,10 +385,12 @@ def format_table(rows: Sequence[tuple[str, dict[int, dict[str, float]]]],
 def print_scores(result: ReplayResult, scores: dict[int, dict[str, float]], name: str) -> None:
     print(f"{name}: {result.config.label}, seed {result.config.seed}, dt {result.config.dt_s} s, "
           f"{len(result.times_s)} ticks, CPU {result.cpu_s:.1f} s")
-    print(f"{'robot':>6} {'pos RMSE [m]':>13} {'heading RMSE [rad]':>19} {'final err [m]':>14}")
+    print(f"{'robot':>6} {'pos RMSE [m]':>13} {'heading RMSE [rad]':>19} {'final err [m]':>14} "
+          f"{'localized [s]':>14} {'RMSE after [m]':>15} {'recovery [s]':>13}")
     for rid, s in scores.items():
         print(f"{rid:>6} {s['position_rmse_m']:13.3f} {s['heading_rmse_rad']:19.3f} "
-              f"{s['final_error_m']:14.3f}")
+              f"{s['final_error_m']:14.3f} {s['localized_s']:14.1f} {s['rmse_localized_m']:15.3f} "
+              f"{s['recovery_s']:13.1f}")
     pos = [s["position_rmse_m"] for s in scores.values()]
     head = [s["heading_rmse_rad"] for s in scores.values()]
     print(f"{'mean':>6} {np.mean(pos):13.3f} {np.mean(head):19.3f}")
@@ -301,9 +410,20 @@ def add_arguments(p) -> None:
     p.add_argument("--seed", type=int, default=0, help="run seed (default 0)")
     p.add_argument("--dt-s", type=float, default=DEFAULT_DT_S, help="tick length (default 0.02 s)")
     p.add_argument("--duration-s", type=float, default=None, help="replay only this long")
+    p.add_argument("--calibration", default="self",
+                   help="camera range bias: self (estimated while localizing, no ground truth; "
+                        "the default), vicon (fitted against the ground truth: a reference), "
+                        "none")
     p.add_argument("--calibration-s", type=float, default=120.0,
-                   help="calibrate each camera's range bias on the first SECONDS of readings "
-                        "against the ground truth (default 120; 0: no calibration)")
+                   help="with --calibration vicon: fit on the first SECONDS of readings "
+                        "(default 120)")
+    p.add_argument("--start", default="known",
+                   help="known (the first Vicon pose; default) or unknown (uniform over the "
+                        "landmark field, every heading: pf and cfsga only)")
+    p.add_argument("--kidnap-s", type=float, default=None,
+                   help="teleport a robot's estimate this many seconds after the start")
+    p.add_argument("--kidnap-robot", type=int, default=None,
+                   help="the robot kidnapped (data set id; default the first)")
     p.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
                    help="algorithm parameter, value as JSON (repeatable), e.g. --param fusion=\"sgikf\"")
     p.add_argument("--out", default=None,
@@ -328,12 +448,19 @@ def _parse_params(items: Sequence[str]) -> dict:
 
 def main(args) -> int:
     """``swarmloc mrclam``: returns 0, or 2 with a message for a bad folder or option."""
-    dataset = load_dataset(args.path)
+    if args.calibration not in CALIBRATIONS:
+        raise ValueError(f"--calibration: unknown value {args.calibration!r} (known: "
+                         f"{', '.join(CALIBRATIONS)})")
+    if args.start not in STARTS:
+        raise ValueError(f"--start: unknown value {args.start!r} (known: {', '.join(STARTS)})")
     if not args.calibration_s >= 0:
         raise ValueError(f"--calibration-s must be >= 0, got {args.calibration_s}")
     config = ReplayConfig(algorithm=args.algorithm, cooperative=args.cooperative, seed=args.seed,
                           dt_s=args.dt_s, params=_parse_params(args.param),
-                          duration_s=args.duration_s, calibration_s=args.calibration_s or None)
+                          duration_s=args.duration_s, calibration=args.calibration,
+                          calibration_s=args.calibration_s or None, start=args.start,
+                          kidnap_s=args.kidnap_s, kidnap_robot=args.kidnap_robot)
+    dataset = load_dataset(args.path)
     try:
         result = run_replay(dataset, config)
     except TypeError as exc:  # a --param of the wrong type: a usage error like a bad value
@@ -342,10 +469,12 @@ def main(args) -> int:
     print_scores(result, scores, dataset.name)
     if args.out:
         out = Path(args.out)
-        plot = plot_trajectories(result, dataset, out / f"trajectories_{config.label.replace('+', '_')}.png")
+        plot = plot_trajectories(result, dataset, out / f"trajectories_{plot_name(config.label)}.png")
         (out / "scores.json").write_text(json.dumps(
             {"dataset": dataset.name, "config": config.label, "seed": config.seed,
-             "dt_s": config.dt_s, "calibration_s": config.calibration_s,
+             "dt_s": config.dt_s, "calibration": config.calibration,
+             "calibration_s": config.calibration_s, "start": config.start,
+             "kidnap_s": config.kidnap_s,
              "params": dict(config.params),
              "robots": {str(k): v for k, v in scores.items()}}, indent=2))
         print(f"plot: {plot}")

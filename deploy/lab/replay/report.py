@@ -14,19 +14,34 @@ with the spec's settings (``--spec``, default the shipped spec named like the ex
 from __future__ import annotations
 
 import csv
+import math
 from pathlib import Path
 
 import numpy as np
 
 from swarmloc.config import ConfigError
-from swarmloc.deploy.lab.replay.mrclam import REPORT_ALGORITHMS, format_table
+from swarmloc.deploy.lab.replay.mrclam import (
+    LOCALIZED_M,
+    REPORT_ALGORITHMS,
+    ReplayConfig,
+    format_table,
+    plot_name,
+)
 
 #: The columns of the report's ``results.csv``.
-RESULT_COLUMNS = ("dataset", "algorithm", "cooperative", "seed", "dt_s", "robot",
-                  "position_rmse_m", "heading_rmse_rad", "final_error_m", "scored_ticks", "cpu_s")
+RESULT_COLUMNS = ("dataset", "algorithm", "cooperative", "calibration", "start", "kidnap_s",
+                  "seed", "dt_s", "robot", "position_rmse_m", "heading_rmse_rad", "final_error_m",
+                  "scored_ticks", "localized_s", "rmse_localized_m", "recovery_s", "cpu_s")
 _INT = frozenset({"seed", "replication", "robot", "scored_ticks"})
 _FLOAT = frozenset({"dt_s", "position_rmse_m", "heading_rmse_rad", "final_error_m", "cpu_s",
-                    "wall_s"})
+                    "wall_s", "kidnap_s", "localized_s", "rmse_localized_m", "recovery_s"})
+_ROUNDED = frozenset({"position_rmse_m", "heading_rmse_rad", "final_error_m", "localized_s",
+                      "rmse_localized_m", "recovery_s"})
+#: Rows of results files written before these columns existed: the Vicon fit, known start.
+_DEFAULTS = {"calibration": "vicon", "start": "known", "kidnap_s": None}
+#: Issue 19's bar for a global localization: under LOCALIZED_M within this long of the start.
+LOCALIZE_WITHIN_S = 60.0
+_CALIBRATION_ORDER = {"self": 0, "none": 1, "vicon": 2}
 
 
 def load_replay_results(paths) -> list[dict]:
@@ -41,11 +56,11 @@ def load_replay_results(paths) -> list[dict]:
             if missing:
                 raise ConfigError(f"{path}: not a replay results file (no {', '.join(missing)})")
             for line, raw in enumerate(reader, start=2):
-                row = {}
+                row = dict(_DEFAULTS)
                 try:
                     for k, v in raw.items():
-                        if v == "":
-                            row[k] = None
+                        if v == "" or v is None:
+                            row[k] = row.get(k)
                         elif k in _INT:
                             row[k] = int(v)
                         elif k in _FLOAT:
@@ -60,58 +75,140 @@ def load_replay_results(paths) -> list[dict]:
     return rows
 
 
+#: A configuration of the report: (algorithm, cooperative, calibration, start, kidnap_s).
+def _key(row: dict) -> tuple:
+    return (row["algorithm"], row["cooperative"], row["calibration"], row["start"],
+            row["kidnap_s"])
+
+
 def _config_order(key):
-    algorithm, cooperative = key
+    algorithm, cooperative, calibration, start, kidnap_s = key
     index = REPORT_ALGORITHMS.index(algorithm) if algorithm in REPORT_ALGORITHMS else 99
-    return (index, algorithm, cooperative)
+    return (start != "known", kidnap_s is not None, _CALIBRATION_ORDER.get(calibration, 9),
+            index, algorithm, cooperative)
 
 
-def _label(algorithm: str, cooperative: bool) -> str:
-    return f"{algorithm}{'+coop' if cooperative else ''}"
+def _label(key) -> str:
+    algorithm, cooperative, calibration, start, kidnap_s = key
+    return ReplayConfig(algorithm=algorithm, cooperative=cooperative, calibration=calibration,
+                        start=start, kidnap_s=kidnap_s).label
+
+
+def _fmt(value, spec: str = "{:.3f}") -> str:
+    return "-" if value is None or not math.isfinite(value) else spec.format(value)
+
+
+def _global_tables(groups: dict, robot_ids: list[int]) -> list[str]:
+    """Unknown start: per configuration and robot, the seeds localized within
+    LOCALIZE_WITHIN_S (the rest are failures), the median time and the mean RMSE after; then
+    every seed."""
+    head = "| configuration | " + " | ".join(f"R{r}" for r in robot_ids) + " | all robots |"
+    sep = "|---|" + "---:|" * (len(robot_ids) + 1)
+    summary, per_seed = [head, sep], []
+    for key, by_seed in groups.items():
+        seeds = sorted(by_seed)
+        cells, all_ok = [], 0
+        for rid in robot_ids:
+            times = np.array([by_seed[s][rid]["localized_s"] for s in seeds], dtype=float)
+            after = np.array([by_seed[s][rid]["rmse_localized_m"] for s in seeds], dtype=float)
+            ok = np.isfinite(times) & (times <= LOCALIZE_WITHIN_S)
+            cells.append(f"{int(ok.sum())}/{len(seeds)}, {_fmt(np.median(times[ok]) if ok.any() else None, '{:.0f}')} s, "
+                         f"{_fmt(float(np.mean(after[ok])) if ok.any() else None)} m")
+        for s in seeds:
+            t = [by_seed[s][rid]["localized_s"] for rid in robot_ids]
+            all_ok += all(math.isfinite(v) and v <= LOCALIZE_WITHIN_S for v in t)
+            per_seed.append(f"| {_label(key)} | {s} | " + " | ".join(
+                f"{_fmt(by_seed[s][rid]['localized_s'], '{:.1f}')} / "
+                f"{_fmt(by_seed[s][rid]['rmse_localized_m'])}" for rid in robot_ids) + " |")
+        summary.append(f"| {_label(key)} | " + " | ".join(cells) + f" | {all_ok}/{len(seeds)} |")
+    seed_head = ["| configuration | seed | " + " | ".join(f"R{r}" for r in robot_ids) + " |",
+                 "|---|---:|" + "---:|" * len(robot_ids)]
+    return [("Unknown start (uniform over the landmark field, every heading). Per robot: seeds "
+            f"under {LOCALIZED_M} m within {LOCALIZE_WITHIN_S:.0f} s and staying there to the "
+            "end (the others are failures), the median time to get there, the mean position "
+            "RMSE from then on; last column: seeds in which every robot made it."), "",
+            *summary, "", "Every seed: time until localized [s] / RMSE after [m] ('-': never).",
+            "", *seed_head, *per_seed, ""]
+
+
+def _kidnap_table(groups: dict) -> list[str]:
+    lines = ["| configuration | robot | kidnap at [s] | seed | recovered after [s] | RMSE after [m] |",
+             "|---|---:|---:|---:|---:|---:|"]
+    for key, by_seed in groups.items():
+        for s in sorted(by_seed):
+            for rid, r in sorted(by_seed[s].items()):
+                if r.get("kidnapped"):
+                    lines.append(f"| {_label(key)} | {rid} | {key[4]:.0f} | {s} | "
+                                 f"{_fmt(r['recovery_s'], '{:.1f}')} | "
+                                 f"{_fmt(r['rmse_localized_m'])} |")
+    return [("Kidnap: at the given time the robot's odometry says it jumped 2 m and turned 90 "
+            "degrees (its estimate is teleported; the robot did not move). Recovered: under "
+            f"{LOCALIZED_M} m again and staying there ('-': never)."), "", *lines, ""]
 
 
 def write_report(rows: list[dict], out_dir: str | Path, replay_first=None) -> Path:
-    """``results.csv``, ``results.md`` and (with ``replay_first(algorithm, cooperative, seed)``
-    giving ``(result, dataset)``) the trajectory plots in ``out_dir``; returns ``results.md``."""
+    """``results.csv``, ``results.md`` and (with ``replay_first(key, seed)`` giving ``(result,
+    dataset)``) the trajectory plots in ``out_dir``; returns ``results.md``. Plots: every
+    self-calibrated tracking configuration and every global-localization and kidnap one (the
+    reference calibrations only have table rows)."""
     from swarmloc.deploy.lab.replay.mrclam import plot_trajectories
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    configs = sorted({(r["algorithm"], r["cooperative"]) for r in rows}, key=_config_order)
+    configs = sorted({_key(r) for r in rows}, key=_config_order)
     robot_ids = sorted({r["robot"] for r in rows})
-    ordered, table_rows = [], []
-    for algorithm, cooperative in configs:
-        mine = sorted((r for r in rows if (r["algorithm"], r["cooperative"]) == (algorithm,
-                                                                                  cooperative)),
-                      key=lambda r: (r["seed"], r["robot"]))
+    ordered, tracking, global_groups, kidnap_groups = [], [], {}, {}
+    for key in configs:
+        mine = sorted((r for r in rows if _key(r) == key), key=lambda r: (r["seed"], r["robot"]))
         ordered += mine
         seeds = sorted({r["seed"] for r in mine})
         by_seed = {s: {r["robot"]: r for r in mine if r["seed"] == s} for s in seeds}
-        mean_scores = {rid: {k: float(np.mean([by_seed[s][rid][k] for s in seeds]))
-                             for k in ("position_rmse_m", "heading_rmse_rad")}
-                       for rid in robot_ids}
-        label = _label(algorithm, cooperative) + (f" ({len(seeds)} seeds)" if len(seeds) > 1
-                                                  else "")
-        table_rows.append((label, mean_scores))
-        if replay_first is not None:
-            result, dataset = replay_first(algorithm, cooperative, seeds[0])
-            name = _label(algorithm, cooperative).replace("+", "_")
-            plot_trajectories(result, dataset, out / f"trajectories_{name}.png")
+        if key[4] is not None:
+            for s in seeds:  # the kidnapped robot: the setting's, else the one that recovered
+                robots = by_seed[s]
+                rid = mine[0].get("kidnap_robot")
+                if rid not in robots:
+                    rid = next((r for r, row in robots.items() if row["recovery_s"] is not None
+                                and math.isfinite(row["recovery_s"])), min(robots))
+                robots[rid] = {**robots[rid], "kidnapped": True}
+            kidnap_groups[key] = by_seed
+        elif key[3] != "known":
+            global_groups[key] = by_seed
+        else:
+            mean_scores = {rid: {k: float(np.mean([by_seed[s][rid][k] for s in seeds]))
+                                 for k in ("position_rmse_m", "heading_rmse_rad")}
+                           for rid in robot_ids}
+            label = _label(key) + (f" ({len(seeds)} seeds)" if len(seeds) > 1 else "")
+            if key[2] == "vicon":
+                label += " [reference: Vicon in the loop]"
+            tracking.append((label, mean_scores))
+        if replay_first is not None and (key[2] == "self" or key[3] != "known"
+                                         or key[4] is not None):
+            result, dataset = replay_first(key, seeds[0])
+            plot_trajectories(result, dataset, out / f"trajectories_{plot_name(_label(key))}.png")
     with (out / "results.csv").open("w", newline="") as fh:
         writer = csv.DictWriter(fh, fieldnames=list(RESULT_COLUMNS))
         writer.writeheader()
         for r in ordered:
-            writer.writerow({k: (round(r[k], 4) if k in ("position_rmse_m", "heading_rmse_rad",
-                                                        "final_error_m") else r[k])
+            writer.writerow({k: (round(r[k], 4) if k in _ROUNDED and r[k] is not None else r.get(k))
                              for k in RESULT_COLUMNS})
     datasets = sorted({r["dataset"] for r in rows})
     dt_s = sorted({r["dt_s"] for r in rows})
     seed = min(r["seed"] for r in rows)
     text = [(f"Dataset {', '.join(datasets)}, tick {', '.join(map(str, dt_s))} s, seeds from "
-             f"{seed}."), "",
-            "Position RMSE [m]", "", format_table(table_rows, robot_ids), "",
-            "Heading RMSE [rad]", "",
-            format_table(table_rows, robot_ids, "heading_rmse_rad"), ""]
+             f"{seed}."), ""]
+    if tracking:
+        text += [("Known start (the first Vicon pose; no other ground truth in the loop but in "
+                 "the rows marked reference). Calibration of the camera's range bias: self "
+                 "(estimated while localizing, the default), none-cal (none), vicon-cal (fitted "
+                 "against Vicon on the first 120 s of the run scored)."), "",
+                 "Position RMSE [m]", "", format_table(tracking, robot_ids), "",
+                 "Heading RMSE [rad]", "", format_table(tracking, robot_ids, "heading_rmse_rad"),
+                 ""]
+    if global_groups:
+        text += _global_tables(global_groups, robot_ids)
+    if kidnap_groups:
+        text += _kidnap_table(kidnap_groups)
     page = out / "results.md"
     page.write_text("\n".join(text))
     return page
@@ -133,14 +230,19 @@ def write_from_args(paths: list[Path], args) -> Path:
     spec = with_overrides(load_spec(args.spec or experiments[0]),
                           fixed=list(getattr(args, "set", None) or []))
     by_id = {s.id: s for s in settings(spec)}
+    for r in rows:  # which robot a kidnap setting kidnaps (not a column of the results)
+        if r.get("kidnap_s") is not None and r["setting"] in by_id:
+            setting = by_id[r["setting"]]
+            scenario = load_replay_scenario(setting.scenario, list(setting.overrides))
+            r["kidnap_robot"] = scenario.config().kidnap_robot
     first_setting = {}
     for r in sorted(rows, key=lambda r: r["seed"]):
-        first_setting.setdefault((r["algorithm"], r["cooperative"]), r["setting"])
+        first_setting.setdefault(_key(r), r["setting"])
 
-    def replay_first(algorithm, cooperative, seed):
-        setting = by_id.get(first_setting[(algorithm, cooperative)])
+    def replay_first(key, seed):
+        setting = by_id.get(first_setting[key])
         if setting is None:
-            raise ConfigError(f"setting {first_setting[(algorithm, cooperative)]!r} is not in "
+            raise ConfigError(f"setting {first_setting[key]!r} is not in "
                               f"spec {spec.name!r}: give the spec the rows come from (--spec)")
         scenario = load_replay_scenario(setting.scenario, [*setting.overrides, f"seed={seed}"])
         dataset = _dataset(str(Path(scenario.dataset).resolve()))
