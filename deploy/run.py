@@ -18,6 +18,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from swarmloc.deploy.fork.server import ForkedAgent, ForkedAgents
 from swarmloc.deploy.launch import (
     ONE_THREAD_ZENOH_RUNTIME,
     Supervisor,
@@ -80,7 +81,9 @@ class LocalSwarm:
     router_endpoint: str  # where observers and remote pieces connect
     world: subprocess.Popen
     world_endpoint: str  # where the agents connect
-    agents: list[subprocess.Popen]
+    #: one per robot: a ``Popen``, or for e-puck agents a :class:`ForkedAgent` (same ``pid``,
+    #: ``poll()``, ``wait()``)
+    agents: list[subprocess.Popen | ForkedAgent]
 
 
 def start_swarm(sup: Supervisor, scenario_file: Path, *, run: str, robots: int, out: Path,
@@ -95,8 +98,9 @@ def start_swarm(sup: Supervisor, scenario_file: Path, *, run: str, robots: int, 
 
     With more agents than cores, agents run at a lower CPU priority (``agent_nice``, default 5
     then): the world-server is the serial part of every lockstep tick, and an agent that preempts
-    it delays all the others. E-puck agents run Zenoh on one thread (launch.py:
-    ONE_THREAD_ZENOH_RUNTIME).
+    it delays all the others. E-puck agents are forked from one warm agent server
+    (deploy/fork/server.py) and run Zenoh on one thread (launch.py: ONE_THREAD_ZENOH_RUNTIME);
+    the other families' agents are one ``swarmloc agent`` each.
     """
     if agent_nice is None:
         agent_nice = 5 if robots > (os.cpu_count() or 1) else 0
@@ -107,14 +111,18 @@ def start_swarm(sup: Supervisor, scenario_file: Path, *, run: str, robots: int, 
     if realtime:
         args.append("--realtime")
     world, world_endpoint = start_announcing(sup, args, log_path=log_dir / "world.log")
-    foraging = family_of(scenario_data(str(scenario_file))) == "foraging"
-    agent_env = {"ZENOH_RUNTIME": ONE_THREAD_ZENOH_RUNTIME} if foraging else None
-    agents = [
-        sup.start(["agent", "--robot", str(i), "-m", "client", "-e", world_endpoint, "--run", run,
-                   "--join-timeout-s", str(join_timeout_s), "--nice", str(agent_nice), *agent_args],
-                  log_path=log_dir / f"agent-{i}.log", env=agent_env)
-        for i in range(robots)
-    ]
+    common = ["-m", "client", "-e", world_endpoint, "--run", run, "--join-timeout-s",
+              str(join_timeout_s), "--nice", str(agent_nice), *agent_args]
+    if family_of(scenario_data(str(scenario_file))) == "foraging":
+        # Forked from one warm server (deploy/fork/server.py), each its own process and session.
+        server = sup.start(["agents", "--robots", f"0-{robots - 1}", *common, "--log-dir", str(log_dir),
+                            "--announce", "--die-with-parent"], stdout=subprocess.PIPE,
+                           log_path=log_dir / "agent-server.log",
+                           env={"ZENOH_RUNTIME": ONE_THREAD_ZENOH_RUNTIME})
+        agents = ForkedAgents(server, list(range(robots))).wait_forked(join_timeout_s)
+    else:
+        agents = [sup.start(["agent", "--robot", str(i), *common], log_path=log_dir / f"agent-{i}.log")
+                  for i in range(robots)]
     return LocalSwarm(endpoint, world, world_endpoint, agents)
 
 
