@@ -52,6 +52,7 @@ class TickStats:
     late_acts: int = 0  # live robots whose act missed its tick (deadline or lockstep timeout)
     stale_acts: int = 0  # acts that arrived after their tick was closed
     overruns: int = 0
+    overruns_after_1s: int = 0  # those of ticks after the run's first wall second (start-up)
 
     def summary(self) -> dict:
         d = np.array(self.tick_durations_s) if self.tick_durations_s else np.zeros(1)
@@ -67,6 +68,7 @@ class TickStats:
             "late_acts": self.late_acts,
             "stale_acts": self.stale_acts,
             "overruns": self.overruns,
+            "overruns_after_1s": self.overruns_after_1s,
         }
 
 
@@ -301,6 +303,8 @@ class WorldServer:
                     self._stop.wait(pause)
                 else:
                     self.stats.overruns += 1
+                    if time.perf_counter() - self.stats.started_s > 1.0:
+                        self.stats.overruns_after_1s += 1
         return self.finish("completed" if world.done else "stopped")
 
     def _publish_state(self) -> None:
