@@ -199,16 +199,19 @@ class ForkedAgent:
     """One agent forked by the server, as the launcher sees it: ``Popen``'s ``pid``,
     ``returncode``, ``poll()`` and ``wait()``."""
 
-    def __init__(self, robot_id: int, pid: int) -> None:
+    def __init__(self, robot_id: int, pid: int, owner: ForkedAgents) -> None:
         self.robot_id, self.pid = robot_id, pid
         self.returncode: int | None = None
         self._ended = threading.Event()
+        self._owner = owner
 
     def _end(self, code: int) -> None:
         self.returncode = code
         self._ended.set()
 
     def poll(self) -> int | None:
+        if self.returncode is None and self._owner.server.poll() is not None:
+            self._owner.finish_reading()  # the server is gone: its last lines are in the pipe
         return self.returncode
 
     def wait(self, timeout: float | None = None) -> int:
@@ -235,7 +238,7 @@ class ForkedAgents:
             except ValueError:
                 continue
             if "pid" in msg:
-                self._by_robot[msg["robot"]] = ForkedAgent(msg["robot"], msg["pid"])
+                self._by_robot[msg["robot"]] = ForkedAgent(msg["robot"], msg["pid"], self)
                 if len(self._by_robot) == self._wanted:
                     self._all_forked.set()
             elif "exit" in msg and msg["robot"] in self._by_robot:
@@ -247,6 +250,10 @@ class ForkedAgents:
             if agent.returncode is None:
                 agent._end(-signal.SIGKILL)
         self._all_forked.set()
+
+    def finish_reading(self, timeout_s: float = 10.0) -> None:
+        """Once the server has exited: read what it printed last (each agent's exit)."""
+        self._reader.join(timeout_s)
 
     def wait_forked(self, timeout_s: float) -> list[ForkedAgent]:
         """The handles, in robot order, once every agent is forked."""
