@@ -8,7 +8,8 @@ memory, mean and max, from ``/proc/PID/smaps_rollup``, sampled ``--settle-s`` af
 
 ``--realtime N1 N2 ...`` runs each swarm size in real time (10 Hz) for ``--duration-s`` and
 prints the table: ticks/s, p50/p99 tick (ms, as the world-server measured them), overruns after
-the run's first second, and the memory of the whole run's process tree (PSS). After the sizes
+the run's first second, the memory of the whole run's process tree (PSS), and where the
+world-server's ticks went (computing and putting the Senses, waiting for the Acts, stepping). After the sizes
 given it goes on by ``--step`` agents while 10 Hz holds (10.0 ticks/s, p99 under the 100 ms
 period, no overrun after the first second), up to ``--max``. Usage:
 
@@ -190,6 +191,15 @@ def bench_memory(n: int, scenario: str, settle_s: float, tmp: str) -> None:
     print(f"whole run PSS (MiB) : {mib(tree)}  ({load()})")
 
 
+def phases(t: dict) -> str:
+    """Where the world-server's ticks went (world/server.py: TickStats.phases_s)."""
+    try:
+        return "/".join(f"{t[f'{p}_ms_p50']:.1f}" for p in ("sense_put", "collect", "step")) + " | " + \
+            "/".join(f"{t[f'{p}_ms_p99']:.1f}" for p in ("sense_put", "collect", "step"))
+    except (KeyError, TypeError):
+        return "-"
+
+
 def holds(t: dict) -> bool:
     return (t["ticks_per_s"] or 0) >= HOLD_TICKS_PER_S and t["tick_ms_p99"] < PERIOD_MS \
         and t["overruns_after_1s"] == 0
@@ -197,7 +207,7 @@ def holds(t: dict) -> bool:
 
 def bench_realtime(sizes: list[int], scenario: str, duration_s: float, step: int, top: int, tmp: str) -> None:
     print(f"{'agents':>6} {'ticks/s':>8} {'p50 ms':>7} {'p99 ms':>7} {'overruns>1s':>11} {'overruns':>8} "
-          f"{'late acts':>9} {'total MiB':>9} {'joined s':>8} {'holds':>5}  load")
+          f"{'late acts':>9} {'total MiB':>9} {'joined s':>8} {'holds':>5} {'sense/collect/step p50|p99 ms':>31}  load")
     largest = None
     queue = list(sizes)
     while queue:
@@ -218,7 +228,7 @@ def bench_realtime(sizes: list[int], scenario: str, duration_s: float, step: int
         print(f"{n:>6} {t['ticks_per_s']:>8} {t['tick_ms_p50']:>7} {t['tick_ms_p99']:>7} "
               f"{t['overruns_after_1s']:>11} {t['overruns']:>8} {t['late_acts']:>9} "
               f"{mib(total) if total else '-':>9} {f'{joined:.1f}' if joined else '-':>8} "
-              f"{'yes' if ok else 'no':>5}  {load_before} -> {load()}", flush=True)
+              f"{'yes' if ok else 'no':>5} {phases(t):>31}  {load_before} -> {load()}", flush=True)
         if ok and not queue and n + step <= top:
             queue.append(n + step)
     print(f"largest swarm that held 10 Hz: {largest if largest else 'none'}")
