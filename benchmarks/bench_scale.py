@@ -8,7 +8,8 @@ memory, mean and max, from ``/proc/PID/smaps_rollup``, sampled ``--settle-s`` af
 
 ``--realtime N1 N2 ...`` runs each swarm size in real time (10 Hz) for ``--duration-s`` and
 prints the table: ticks/s, p50/p99 tick (ms, as the world-server measured them), overruns after
-the run's first second, the memory of the whole run's process tree (PSS), and where the
+the run's first second, the memory of the whole run's process tree (PSS), the CPU the agents
+(all together) and the world-server used, in cores, over a window mid-run, and where the
 world-server's ticks went (computing and putting the Senses, waiting for the Acts, stepping). After the sizes
 given it goes on by ``--step`` agents while 10 Hz holds (10.0 ticks/s, p99 under the 100 ms
 period, no overrun after the first second), up to ``--max``. Usage:
@@ -73,6 +74,20 @@ def memory_kib(pid: int) -> tuple[int, int] | None:
         return int(fields["Pss"].split()[0]), int(fields["Rss"].split()[0])
     except (OSError, KeyError, ValueError):
         return None
+
+
+def cpu_s(pid: int) -> float:
+    """User + system CPU seconds ``pid`` has used so far (0 if it is gone)."""
+    try:
+        with open(f"/proc/{pid}/stat", encoding="ascii") as f:
+            fields = f.read().rsplit(")", 1)[1].split()
+        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    except (OSError, ValueError, IndexError):
+        return 0.0
+
+
+def world_pid(run_pid: int) -> int | None:
+    return next((p for p in descendants(run_pid) if "world" in cmdline(p)[3:4]), None)
 
 
 def agent_pids(run_pid: int) -> list[int]:
@@ -207,7 +222,8 @@ def holds(t: dict) -> bool:
 
 def bench_realtime(sizes: list[int], scenario: str, duration_s: float, step: int, top: int, tmp: str) -> None:
     print(f"{'agents':>6} {'ticks/s':>8} {'p50 ms':>7} {'p99 ms':>7} {'overruns>1s':>11} {'overruns':>8} "
-          f"{'late acts':>9} {'total MiB':>9} {'joined s':>8} {'holds':>5} {'sense/collect/step p50|p99 ms':>31}  load")
+          f"{'late acts':>9} {'total MiB':>9} {'joined s':>8} {'holds':>5} {'cores agents/world':>18} "
+          f"{'sense/collect/step p50|p99 ms':>31}  load")
     largest = None
     queue = list(sizes)
     while queue:
@@ -215,9 +231,15 @@ def bench_realtime(sizes: list[int], scenario: str, duration_s: float, step: int
         load_before = load()
         run = Run(n, tmp, scenario=scenario, duration_s=duration_s, realtime=True)
         joined = run.watch_joins(timeout_s=180.0)
-        total = None
+        total = cores = None
         if joined is not None:
-            time.sleep(min(5.0, duration_s / 2))  # sample memory mid-run
+            # Mid-run: the tree's memory, and the CPU the agents and the world use over a window.
+            window_s = min(10.0, duration_s / 3)
+            agents, world = agent_pids(run.proc.pid), world_pid(run.proc.pid)
+            before = sum(map(cpu_s, agents)), cpu_s(world) if world else 0.0
+            time.sleep(window_s)  # a measurement window, not a readiness wait
+            after = sum(map(cpu_s, agents)), cpu_s(world) if world else 0.0
+            cores = [(b - a) / window_s for a, b in zip(before, after)]
             total = run.memory()[1]
         t = run.transport(timeout_s=duration_s * 3 + 120)
         if isinstance(t, str):
@@ -228,7 +250,8 @@ def bench_realtime(sizes: list[int], scenario: str, duration_s: float, step: int
         print(f"{n:>6} {t['ticks_per_s']:>8} {t['tick_ms_p50']:>7} {t['tick_ms_p99']:>7} "
               f"{t['overruns_after_1s']:>11} {t['overruns']:>8} {t['late_acts']:>9} "
               f"{mib(total) if total else '-':>9} {f'{joined:.1f}' if joined else '-':>8} "
-              f"{'yes' if ok else 'no':>5} {phases(t):>31}  {load_before} -> {load()}", flush=True)
+              f"{'yes' if ok else 'no':>5} {'/'.join(f'{c:.2f}' for c in cores) if cores else '-':>18} "
+              f"{phases(t):>31}  {load_before} -> {load()}", flush=True)
         if ok and not queue and n + step <= top:
             queue.append(n + step)
     print(f"largest swarm that held 10 Hz: {largest if largest else 'none'}")
