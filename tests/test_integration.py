@@ -288,14 +288,15 @@ def test_sigterm_to_swarmloc_run_stops_every_piece(tmp_path):
         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
     )
     try:
-        # Readiness: the launcher has started every piece, router, world and 3 agents. (Not the
-        # last agent's log file: the launcher opens it just before it starts that agent.)
+        # Readiness: the launcher has started every piece: router, world and the agent server,
+        # and the server has forked its 3 agents (deploy/fork/server.py). (Not the last agent's
+        # log file: the agent opens it just after it is forked.)
         deadline = time.monotonic() + 60
-        while len(pieces := _children(proc.pid)) < 5:
+        while len(pieces := [p for c in _children(proc.pid) for p in (c, *_children(c))]) < 6:
             assert time.monotonic() < deadline, f"the swarm never started: {len(pieces)} pieces"
             assert proc.poll() is None, "swarmloc run exited early"
             time.sleep(0.05)  # polling /proc for readiness, bounded by the deadline
-        assert len(pieces) == 5, f"{len(pieces)} children of swarmloc run, not router, world and 3 agents"
+        assert len(pieces) == 6, f"{len(pieces)} pieces, not router, world, agent server and 3 agents"
         assert (out / run / "logs" / "agent-2.log").exists()
         proc.send_signal(signal.SIGTERM)
         assert proc.wait(timeout=30) != 0

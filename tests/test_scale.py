@@ -136,7 +136,7 @@ def test_batch_engine_takes_more_robots_than_the_wire_carries():
 def test_robot_id_lists():
     assert parse_robot_ids("0-3,7") == [0, 1, 2, 3, 7]
     assert parse_robot_ids("5") == [5]
-    for bad in ("3-1", "a", "1,1", "-2", "0-"):
+    for bad in ("3-1", "a", "1,1", "-2", "0-", "65530-65536"):
         with pytest.raises(ValueError, match="--robots"):
             parse_robot_ids(bad)
 

@@ -67,6 +67,10 @@ def parse_robot_ids(text: str) -> list[int]:
         ids.extend(range(first, last + 1))
     if len(set(ids)) != len(ids):
         raise ValueError(f"--robots: '{text}' names a robot twice")
+    from swarmloc.protocol.messages import MAX_ROBOT_ID
+
+    if max(ids) > MAX_ROBOT_ID:
+        raise ValueError(f"--robots: robot ids go up to {MAX_ROBOT_ID} (the protocol's limit)")
     return ids
 
 
@@ -110,10 +114,12 @@ def _child(args, robot: int, log_dir: Path | None) -> int:
 def serve(args) -> int:
     """Fork one agent per robot id, reap them, pass a stop on; returns 0 if every agent did."""
     from swarmloc.deploy.cli import _compile_kernels
+    from swarmloc.deploy.run import check_memory, mem_available_mib
     from swarmloc.protocol.session import config_from_args
 
     robots = parse_robot_ids(args.robots)
     config_from_args(args)  # a bad transport flag stops us here, once, not in every child
+    check_memory(len(robots), "foraging", mem_available_mib())  # before anything is forked
     stopping = threading.Event()
     children: dict[int, int] = {}  # pid -> robot id
 
