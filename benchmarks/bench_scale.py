@@ -118,12 +118,14 @@ class Run:
         self._endpoint_seen = threading.Event()
         self.all_joined = threading.Event()
         self.joined_s: float | None = None
+        self.started_s: float | None = None
         threading.Thread(target=self._read_stderr, daemon=True).start()
 
     def _read_stderr(self) -> None:
         for line in self.proc.stderr:
             self.stderr.append(line)
             if line.startswith("router on ") and self.endpoint is None:
+                self.started_s = time.perf_counter() - self.t0  # every piece started and forked
                 self.endpoint = line.split()[2].rstrip(";")
                 self._endpoint_seen.set()
         self._endpoint_seen.set()
@@ -148,11 +150,19 @@ class Run:
                 self.joined_s = time.perf_counter() - self.t0
                 self.all_joined.set()
 
-        with open_session(session_config(mode="client", connect=[self.endpoint])) as session:
-            sub = session.liveliness().declare_subscriber(Keys(self.run).alive_all, on_token, history=True)
-            self.all_joined.wait(max(0.0, timeout_s - (time.perf_counter() - self.t0)))
-            sub.undeclare()
+        # Closed only after the run (close_watch): closing it took seconds under load, which
+        # would have shifted the measurement window that follows.
+        self._session = open_session(session_config(mode="client", connect=[self.endpoint]))
+        self._sub = self._session.liveliness().declare_subscriber(Keys(self.run).alive_all, on_token,
+                                                                  history=True)
+        self.all_joined.wait(max(0.0, timeout_s - (time.perf_counter() - self.t0)))
         return self.joined_s
+
+    def close_watch(self) -> None:
+        if getattr(self, "_session", None) is not None:
+            self._sub.undeclare()
+            self._session.close()
+            self._session = None
 
     def memory(self) -> tuple[list[tuple[int, int]], int]:
         """Each agent's (PSS, RSS) in KiB, and the PSS of the run's whole process tree."""
@@ -161,6 +171,7 @@ class Run:
         return agents, sum(pss for pss, _ in tree)
 
     def stop(self) -> None:
+        self.close_watch()
         if self.proc.poll() is None:
             self.proc.send_signal(signal.SIGTERM)  # swarmloc run stops every piece it started
         try:
@@ -175,6 +186,7 @@ class Run:
         except subprocess.TimeoutExpired:
             self.stop()
             return "timed out"
+        self.close_watch()
         results = self.out / self.run / "results.json"
         if self.proc.returncode != 0 or not results.exists():
             return "".join(self.stderr).strip()[-300:] or f"exit {self.proc.returncode}"
@@ -199,7 +211,8 @@ def bench_memory(n: int, scenario: str, settle_s: float, tmp: str) -> None:
         run.stop()
     pss = [p for p, _ in agents]
     rss = [r for _, r in agents]
-    print(f"all {n} joined {joined:.1f} s after `swarmloc run` started")
+    print(f"all {n} joined {joined:.1f} s after `swarmloc run` started "
+          f"(every piece started and every agent forked after {run.started_s:.1f} s)")
     print(f"agents measured     : {len(agents)}")
     print(f"PSS per agent (MiB) : mean {mib(statistics.mean(pss))}  max {mib(max(pss))}")
     print(f"RSS per agent (MiB) : mean {mib(statistics.mean(rss))}  max {mib(max(rss))}")
@@ -239,8 +252,9 @@ def bench_realtime(sizes: list[int], scenario: str, duration_s: float, step: int
             before = sum(map(cpu_s, agents)), cpu_s(world) if world else 0.0
             time.sleep(window_s)  # a measurement window, not a readiness wait
             after = sum(map(cpu_s, agents)), cpu_s(world) if world else 0.0
-            cores = [(b - a) / window_s for a, b in zip(before, after)]
             total = run.memory()[1]
+            if run.proc.poll() is None:  # else the window was not inside the run: no figure
+                cores = [(b - a) / window_s for a, b in zip(before, after)]
         t = run.transport(timeout_s=duration_s * 3 + 120)
         if isinstance(t, str):
             print(f"{n:>6} failed: {t}")
