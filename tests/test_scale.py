@@ -229,8 +229,7 @@ def test_forked_agents_are_processes_with_their_own_sessions(tmp_path):
         states = _States(swarm.router_endpoint, run)
         try:
             assert states.wait_for(lambda s: s.tick > 0), "the run never started"
-            server = sup.procs[-1]
-            assert "agents" in server.args
+            server = next(p for p in sup.procs if "agents" in p.args)
             pids = [a.pid for a in swarm.agents]
             assert len(set(pids)) == 4 and server.pid not in pids and swarm.world.pid not in pids
             assert all(_ppid(p) == server.pid for p in pids), "each agent is a child of the agent server"
@@ -262,7 +261,8 @@ def test_killed_agent_server_takes_its_agents_along(tmp_path):
                             log_dir=tmp_path / "logs", realtime=True, join_timeout_s=60)
         pids = [a.pid for a in swarm.agents]
         assert all(_alive(p) for p in pids)
-        os.kill(sup.procs[-1].pid, signal.SIGKILL)  # the server, with no chance to pass a stop on
+        server = next(p for p in sup.procs if "agents" in p.args)
+        os.kill(server.pid, signal.SIGKILL)  # the server, with no chance to pass a stop on
         # PR_SET_PDEATHSIG: each agent gets SIGTERM from the kernel, closes its session and exits.
         assert not _wait_gone(pids, 20), "agents outlived their server"
 
@@ -343,3 +343,21 @@ def test_swarmloc_run_refuses_robots_beyond_memory_before_starting(tmp_path):
     assert f"--robots {robots}" in done.stderr and "MemAvailable" in done.stderr
     assert "GiB available" in done.stderr and "at most about" in done.stderr
     assert not (tmp_path / "runs").exists(), "nothing started: not even a run folder"
+
+
+def test_agent_server_stopped_before_it_forks_exits_and_forks_nothing(tmp_path):
+    # `swarmloc run` starts the server before the world and hands it the world's endpoint on
+    # stdin; a run stopped before that (the world failed to start, Ctrl-C) must not leave it waiting.
+    proc = subprocess.Popen([sys.executable, "-m", "swarmloc", "agents", "--robots", "0-1", "-m", "client",
+                             "--run", "nofork", "--announce", "--connect-from-stdin", "--log-dir", str(tmp_path)],
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            start_new_session=True)
+    try:
+        proc.send_signal(signal.SIGTERM)
+        out, _ = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    assert proc.returncode in (128 + signal.SIGTERM, -signal.SIGTERM)
+    assert b"pid" not in out and not list(tmp_path.glob("agent-*.log"))

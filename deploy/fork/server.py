@@ -123,8 +123,12 @@ def serve(args) -> int:
     stopping = threading.Event()
     children: dict[int, int] = {}  # pid -> robot id
 
+    forking = threading.Event()
+
     def on_signal(signum, frame):
         stopping.set()
+        if not forking.is_set():  # still loading or reading stdin: nothing to pass on, just go
+            raise SystemExit(128 + signum)
         for pid in list(children):
             try:
                 os.kill(pid, signal.SIGTERM)
@@ -142,6 +146,12 @@ def serve(args) -> int:
         log_dir.mkdir(parents=True, exist_ok=True)
     _compile_kernels()
     _preload()
+    if args.connect_from_stdin:  # the launcher started us before the world: its endpoint now
+        line = sys.stdin.readline().strip()
+        if not line:
+            raise ValueError("--connect-from-stdin: no endpoint came on stdin")
+        args.connect = [*(args.connect or ()), line]
+        config_from_args(args)
     # Objects that exist now are never collected, so that no collection in a child writes to
     # (and unshares) the pages that hold them.
     gc.collect()
@@ -150,6 +160,7 @@ def serve(args) -> int:
         raise RuntimeError("the agent server runs more than one thread: it must not fork")
     say = (lambda line: print(json.dumps(line), flush=True)) if args.announce else (lambda line: None)
     server_args = argparse.Namespace(**{k: v for k, v in vars(args).items() if k != "func"})
+    forking.set()
     for robot in robots:
         if stopping.is_set():
             break
@@ -279,6 +290,9 @@ def add_parser(sub, agent_args) -> None:
                    help="write each agent's log to LOG_DIR/agent-ID.log (default: this stderr)")
     p.add_argument("--announce", action="store_true",
                    help="print one JSON line per agent forked and per agent ended")
+    p.add_argument("--connect-from-stdin", action="store_true",
+                   help="read one more -e endpoint from stdin once loaded, before forking (so a "
+                        "launcher can start this server while the world is still starting)")
     p.add_argument("--die-with-parent", action="store_true",
                    help="stop every agent when the process that started this one dies")
     p.set_defaults(func=serve)
