@@ -47,14 +47,18 @@ def _ppid(pid: int) -> int | None:
         return None
 
 
-def descendants(root: int) -> list[int]:
-    """Every live process under ``root`` (not itself), from /proc."""
-    parent = {int(p): _ppid(int(p)) for p in os.listdir("/proc") if p.isdigit()}
+def descendants(root: int, parent: dict[int, int | None] | None = None) -> list[int]:
+    """Every live process under ``root`` (not itself), from /proc (or the ``parent`` map of one
+    scan of it: scanning /proc is slow on a loaded machine with a thousand processes)."""
+    if parent is None:
+        parent = {int(p): _ppid(int(p)) for p in os.listdir("/proc") if p.isdigit()}
+    children: dict[int, list[int]] = {}
+    for p, pp in parent.items():
+        children.setdefault(pp, []).append(p)
     found, frontier = [], [root]
     while frontier:
-        kids = [p for p, pp in parent.items() if pp in frontier]
-        found += kids
-        frontier = kids
+        frontier = [k for p in frontier for k in children.get(p, [])]
+        found += frontier
     return found
 
 
@@ -86,14 +90,14 @@ def cpu_s(pid: int) -> float:
         return 0.0
 
 
-def world_pid(run_pid: int) -> int | None:
-    return next((p for p in descendants(run_pid) if "world" in cmdline(p)[3:4]), None)
-
-
-def agent_pids(run_pid: int) -> list[int]:
-    """The agents of a ``swarmloc run``: the children of its agent server (``swarmloc agents``)."""
-    servers = [p for p in descendants(run_pid) if "agents" in cmdline(p)[3:4]]
-    return [p for s in servers for p in descendants(s) if _ppid(p) == s]
+def pieces(run_pid: int) -> tuple[list[int], int | None]:
+    """The agents of a ``swarmloc run`` (the children of its agent server, ``swarmloc agents``)
+    and its world-server, from one scan of /proc."""
+    parent = {int(p): _ppid(int(p)) for p in os.listdir("/proc") if p.isdigit()}
+    children = [p for p, pp in parent.items() if pp == run_pid]
+    servers = [p for p in children if "agents" in cmdline(p)[3:4]]
+    world = next((p for p in children if "world" in cmdline(p)[3:4]), None)
+    return [p for p, pp in parent.items() if pp in servers], world
 
 
 def load() -> str:
@@ -166,7 +170,7 @@ class Run:
 
     def memory(self) -> tuple[list[tuple[int, int]], int]:
         """Each agent's (PSS, RSS) in KiB, and the PSS of the run's whole process tree."""
-        agents = [m for m in map(memory_kib, agent_pids(self.proc.pid)) if m is not None]
+        agents = [m for m in map(memory_kib, pieces(self.proc.pid)[0]) if m is not None]
         tree = [m for m in map(memory_kib, [self.proc.pid, *descendants(self.proc.pid)]) if m is not None]
         return agents, sum(pss for pss, _ in tree)
 
@@ -247,14 +251,15 @@ def bench_realtime(sizes: list[int], scenario: str, duration_s: float, step: int
         total = cores = None
         if joined is not None:
             # Mid-run: the tree's memory, and the CPU the agents and the world use over a window.
-            window_s = min(10.0, duration_s / 3)
-            agents, world = agent_pids(run.proc.pid), world_pid(run.proc.pid)
+            agents, world = pieces(run.proc.pid)
+            t_before = time.perf_counter()
             before = sum(map(cpu_s, agents)), cpu_s(world) if world else 0.0
-            time.sleep(window_s)  # a measurement window, not a readiness wait
+            time.sleep(min(10.0, duration_s / 3))  # a measurement window, not a readiness wait
             after = sum(map(cpu_s, agents)), cpu_s(world) if world else 0.0
-            total = run.memory()[1]
+            window_s = time.perf_counter() - t_before
             if run.proc.poll() is None:  # else the window was not inside the run: no figure
                 cores = [(b - a) / window_s for a, b in zip(before, after)]
+            total = run.memory()[1]
         t = run.transport(timeout_s=duration_s * 3 + 120)
         if isinstance(t, str):
             print(f"{n:>6} failed: {t}")
