@@ -46,11 +46,10 @@ class Supervisor:
     procs: list[subprocess.Popen] = field(default_factory=list)
 
     def start(self, args: list[str], *, log_path: Path | None = None, stdout=None,
-              env: dict[str, str] | None = None, stdin=subprocess.DEVNULL) -> subprocess.Popen:
+              env: dict[str, str] | None = None) -> subprocess.Popen:
         """Start ``swarmloc ARGS`` in its own process group. Its stderr (and its stdout unless
         ``stdout`` is given, e.g. ``subprocess.PIPE``) goes to ``log_path``, else nowhere.
-        ``env``: defaults for the child's environment, under ours (ours wins). ``stdin``: none,
-        unless e.g. ``subprocess.PIPE``."""
+        ``env``: defaults for the child's environment, under ours (ours wins)."""
         # The child inherits the descriptor; ours is closed right after the start.
         log = open(log_path, "ab") if log_path else None  # noqa: SIM115
         sink = log if log is not None else subprocess.DEVNULL
@@ -59,7 +58,7 @@ class Supervisor:
                 PYTHON + args,
                 stdout=stdout if stdout is not None else sink,
                 stderr=sink,
-                stdin=stdin,
+                stdin=subprocess.DEVNULL,
                 start_new_session=True,
                 env={**(env or {}), **os.environ, **CHILD_ENV},
             )

@@ -105,19 +105,6 @@ def start_swarm(sup: Supervisor, scenario_file: Path, *, run: str, robots: int, 
     """
     if agent_nice is None:
         agent_nice = 5 if robots > (os.cpu_count() or 1) else 0
-    common = ["-m", "client", "--run", run, "--join-timeout-s", str(join_timeout_s), "--nice",
-              str(agent_nice), *agent_args]
-    server = None
-    if family_of(scenario_data(str(scenario_file))) == "foraging":
-        # Forked from one warm server (deploy/fork/server.py), each its own process and session.
-        # Started first: it loads its modules and kernels while the router and the world start,
-        # then reads the world's endpoint on stdin and forks.
-        server = sup.start(["agents", "--robots", f"0-{robots - 1}", *common, "--log-dir", str(log_dir),
-                            "--announce", "--die-with-parent", "--connect-from-stdin"],
-                           stdout=subprocess.PIPE, stdin=subprocess.PIPE,
-                           log_path=log_dir / "agent-server.log",
-                           env={"ZENOH_RUNTIME": ONE_THREAD_ZENOH_RUNTIME})
-        forked = ForkedAgents(server, list(range(robots)))
     _, endpoint = start_router(sup)
     args = ["world", str(scenario_file), "-m", "router", "-l", "tcp/127.0.0.1:0",
             "-e", endpoint, "--run", run, "--out", str(out), "--announce",
@@ -125,16 +112,17 @@ def start_swarm(sup: Supervisor, scenario_file: Path, *, run: str, robots: int, 
     if realtime:
         args.append("--realtime")
     world, world_endpoint = start_announcing(sup, args, log_path=log_dir / "world.log")
-    if server is not None:
-        try:
-            server.stdin.write(f"{world_endpoint}\n".encode())
-            server.stdin.close()
-        except BrokenPipeError:
-            pass  # the server is gone; wait_forked says so
-        agents = forked.wait_forked(join_timeout_s)
+    common = ["-m", "client", "-e", world_endpoint, "--run", run, "--join-timeout-s",
+              str(join_timeout_s), "--nice", str(agent_nice), *agent_args]
+    if family_of(scenario_data(str(scenario_file))) == "foraging":
+        # Forked from one warm server (deploy/fork/server.py), each its own process and session.
+        server = sup.start(["agents", "--robots", f"0-{robots - 1}", *common, "--log-dir", str(log_dir),
+                            "--announce", "--die-with-parent"], stdout=subprocess.PIPE,
+                           log_path=log_dir / "agent-server.log",
+                           env={"ZENOH_RUNTIME": ONE_THREAD_ZENOH_RUNTIME})
+        agents = ForkedAgents(server, list(range(robots))).wait_forked(join_timeout_s)
     else:
-        agents = [sup.start(["agent", "--robot", str(i), *common, "-e", world_endpoint],
-                            log_path=log_dir / f"agent-{i}.log")
+        agents = [sup.start(["agent", "--robot", str(i), *common], log_path=log_dir / f"agent-{i}.log")
                   for i in range(robots)]
     return LocalSwarm(endpoint, world, world_endpoint, agents)
 
