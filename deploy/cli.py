@@ -207,17 +207,23 @@ def main_world(args) -> int:
 
 
 def main_agent(args) -> int:
+    stop = _install_stop()
+    if args.nice:
+        os.nice(args.nice)
+    _compile_kernels()  # before joining: a joined agent is ready to answer its first Sense
+    return serve_agent(args, stop)
+
+
+def serve_agent(args, stop: threading.Event) -> int:
+    """One agent's session and run, from ``swarmloc agent``'s arguments: what ``swarmloc
+    agent`` does once its kernels are compiled, and what each agent forked by ``swarmloc agents``
+    does (deploy/fork/server.py)."""
     from swarmloc.agents.node import run_agent
     from swarmloc.protocol.keys import Keys
     from swarmloc.protocol.session import config_from_args, open_session
 
-    stop = _install_stop()
-    keys = Keys(args.run)
-    if args.nice:
-        os.nice(args.nice)
-    _compile_kernels()  # before joining: a joined agent is ready to answer its first Sense
     with open_session(config_from_args(args)) as session:
-        return run_agent(session, keys, args.robot, stop, join_timeout_s=args.join_timeout_s,
+        return run_agent(session, Keys(args.run), args.robot, stop, join_timeout_s=args.join_timeout_s,
                          world_timeout_s=args.world_timeout_s, world_grace_s=args.world_grace_s,
                          null_brain=args.null_brain)
 
@@ -296,6 +302,23 @@ def main_mrclam(args) -> int:
 # -- parsing ----------------------------------------------------------------------------------
 
 
+def _agent_args(p: argparse.ArgumentParser) -> None:
+    """The options of ``swarmloc agent`` but ``--robot``, shared with ``swarmloc agents``."""
+    _run_name(p)
+    _transport(p)
+    p.add_argument("--join-timeout-s", type=float, default=180.0)
+    p.add_argument("--world-timeout-s", type=float, default=60.0,
+                   help="exit when no Sense came for this long")
+    p.add_argument("--world-grace-s", type=float, default=10.0,
+                   help="how long to wait for a world-server that went away to come back (exit code 3)")
+    p.add_argument("--nice", type=int, default=0, choices=range(20), metavar="0..19",
+                   help="lower this agent's CPU priority: on a machine with fewer cores than agents, "
+                        "the world-server (the lockstep's serial part) then runs first")
+    p.add_argument("--null-brain", action="store_true",
+                   help="transport benchmark: answer each Sense with a standstill Act instead of "
+                        "running the brain (e-puck scenarios)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     from swarmloc.deploy import warm
     from swarmloc.deploy.lab import experiment, report
@@ -339,20 +362,12 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("agent", help="run one robot's agent")
     p.add_argument("--robot", type=int, required=True, help="robot id")
-    _run_name(p)
-    _transport(p)
-    p.add_argument("--join-timeout-s", type=float, default=180.0)
-    p.add_argument("--world-timeout-s", type=float, default=60.0,
-                   help="exit when no Sense came for this long")
-    p.add_argument("--world-grace-s", type=float, default=10.0,
-                   help="how long to wait for a world-server that went away to come back (exit code 3)")
-    p.add_argument("--nice", type=int, default=0, choices=range(20), metavar="0..19",
-                   help="lower this agent's CPU priority: on a machine with fewer cores than agents, "
-                        "the world-server (the lockstep's serial part) then runs first")
-    p.add_argument("--null-brain", action="store_true",
-                   help="transport benchmark: answer each Sense with a standstill Act instead of "
-                        "running the brain (e-puck scenarios)")
+    _agent_args(p)
     p.set_defaults(func=main_agent)
+
+    from swarmloc.deploy.fork import server as fork_server
+
+    fork_server.add_parser(sub, _agent_args)
 
     p = sub.add_parser("router", help="run a Zenoh router (no zenohd needed)")
     _transport(p)

@@ -18,6 +18,8 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from swarmloc.config import ConfigError
+from swarmloc.deploy.fork.server import ForkedAgent, ForkedAgents
 from swarmloc.deploy.launch import (
     ONE_THREAD_ZENOH_RUNTIME,
     Supervisor,
@@ -80,7 +82,9 @@ class LocalSwarm:
     router_endpoint: str  # where observers and remote pieces connect
     world: subprocess.Popen
     world_endpoint: str  # where the agents connect
-    agents: list[subprocess.Popen]
+    #: one per robot: a ``Popen``, or for e-puck agents a :class:`ForkedAgent` (same ``pid``,
+    #: ``poll()``, ``wait()``)
+    agents: list[subprocess.Popen | ForkedAgent]
 
 
 def start_swarm(sup: Supervisor, scenario_file: Path, *, run: str, robots: int, out: Path,
@@ -95,8 +99,9 @@ def start_swarm(sup: Supervisor, scenario_file: Path, *, run: str, robots: int, 
 
     With more agents than cores, agents run at a lower CPU priority (``agent_nice``, default 5
     then): the world-server is the serial part of every lockstep tick, and an agent that preempts
-    it delays all the others. E-puck agents run Zenoh on one thread (launch.py:
-    ONE_THREAD_ZENOH_RUNTIME).
+    it delays all the others. E-puck agents are forked from one warm agent server
+    (deploy/fork/server.py) and run Zenoh on one thread (launch.py: ONE_THREAD_ZENOH_RUNTIME);
+    the other families' agents are one ``swarmloc agent`` each.
     """
     if agent_nice is None:
         agent_nice = 5 if robots > (os.cpu_count() or 1) else 0
@@ -107,15 +112,61 @@ def start_swarm(sup: Supervisor, scenario_file: Path, *, run: str, robots: int, 
     if realtime:
         args.append("--realtime")
     world, world_endpoint = start_announcing(sup, args, log_path=log_dir / "world.log")
-    foraging = family_of(scenario_data(str(scenario_file))) == "foraging"
-    agent_env = {"ZENOH_RUNTIME": ONE_THREAD_ZENOH_RUNTIME} if foraging else None
-    agents = [
-        sup.start(["agent", "--robot", str(i), "-m", "client", "-e", world_endpoint, "--run", run,
-                   "--join-timeout-s", str(join_timeout_s), "--nice", str(agent_nice), *agent_args],
-                  log_path=log_dir / f"agent-{i}.log", env=agent_env)
-        for i in range(robots)
-    ]
+    common = ["-m", "client", "-e", world_endpoint, "--run", run, "--join-timeout-s",
+              str(join_timeout_s), "--nice", str(agent_nice), *agent_args]
+    if family_of(scenario_data(str(scenario_file))) == "foraging":
+        # Forked from one warm server (deploy/fork/server.py), each its own process and session.
+        server = sup.start(["agents", "--robots", f"0-{robots - 1}", *common, "--log-dir", str(log_dir),
+                            "--announce", "--die-with-parent"], stdout=subprocess.PIPE,
+                           log_path=log_dir / "agent-server.log",
+                           env={"ZENOH_RUNTIME": ONE_THREAD_ZENOH_RUNTIME})
+        agents = ForkedAgents(server, list(range(robots))).wait_forked(join_timeout_s)
+    else:
+        agents = [sup.start(["agent", "--robot", str(i), *common], log_path=log_dir / f"agent-{i}.log")
+                  for i in range(robots)]
     return LocalSwarm(endpoint, world, world_endpoint, agents)
+
+
+#: What one robot of a local run costs in memory, by how its agent runs (MiB, proportional set
+#: size, measured with benchmarks/bench_scale.py --memory 100 on the project's machine): an e-puck
+#: agent forked from the agent server, 6.9 (rounded up with its share of the world-server's
+#: per-robot state); any other agent is a process of its own, 57 for an e-puck agent started so.
+AGENT_MIB = {"forked": 10.0, "process": 60.0}
+#: The pieces of a run whatever its size: router, world-server, agent server, this launcher.
+BASE_MIB = 600.0
+
+
+def memory_estimate_mib(robots: int, family: str) -> tuple[float, float]:
+    """(MiB per agent, MiB of the whole run) that ``swarmloc run`` of ``robots`` needs."""
+    per_agent = AGENT_MIB["forked" if family == "foraging" else "process"]
+    return per_agent, BASE_MIB + per_agent * robots
+
+
+def mem_available_mib(meminfo: str = "/proc/meminfo") -> float | None:
+    """The kernel's estimate of memory available for new processes (MemAvailable), in MiB."""
+    try:
+        with open(meminfo, encoding="ascii") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) / 1024
+    except (OSError, ValueError):
+        return None
+    return None
+
+
+def check_memory(robots: int, family: str, available_mib: float | None) -> None:
+    """Refuse (ConfigError) a swarm whose estimated memory exceeds what is available: started
+    anyway, it would swap or meet the OOM killer part way through, with pieces half-started."""
+    if available_mib is None:
+        return
+    per_agent, total = memory_estimate_mib(robots, family)
+    if total > available_mib:
+        fits = max(0, int((available_mib - BASE_MIB) // per_agent))
+        raise ConfigError(
+            f"--robots {robots}: this machine cannot hold that swarm: about {total / 1024:.1f} GiB "
+            f"needed ({robots} agents x {per_agent:.0f} MiB + {BASE_MIB:.0f} MiB for the router, "
+            f"world-server and launcher), {available_mib / 1024:.1f} GiB available (MemAvailable "
+            f"in /proc/meminfo); at most about {fits} robots fit")
 
 
 def print_metrics(summary: dict) -> None:
@@ -135,6 +186,7 @@ def run_local(scenario: AnyScenario, *, run_name: str | None, out_root: Path, re
               quiet: bool, join_timeout_s: float = 180.0, null_brains: bool = False,
               view: bool = False, view_http: str = "127.0.0.1:8765", record: str | None = None,
               record_messages: bool = False, particles: int = 0) -> int:
+    check_memory(scenario.robots, scenario.family, mem_available_mib())  # before anything starts
     run = run_name or f"{scenario.name}-{scenario.label}-s{scenario.seed}-{secrets.token_hex(3)}".replace(".", "_")
     out = out_root / run
     out.mkdir(parents=True, exist_ok=True)

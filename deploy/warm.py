@@ -243,21 +243,34 @@ def exercise(ticks: int = 40) -> None:
     """Call every compiled kernel as runs call it (compiling what the cache lacks): a served
     ES1 world answered by agents on both their paths, for every strategy a process runs, and a
     short batch run of every strategy."""
+    from swarmloc.agents.epuck.social_odometry import STRATEGIES
+    from swarmloc.deploy.lab.epuck.batch import run_batch
+    from swarmloc.deploy.scenario import load_any
+
+    for name in STRATEGIES:
+        loaded = load_any("ES1", {"seed": 1}, [f'agent.strategy="{name}"', "world.robots=6",
+                                               f"world.duration_s={ticks / 10}"])
+        run_batch(loaded.scenario)
+    exercise_agents(ticks)
+
+
+def exercise_agents(ticks: int) -> None:
+    """The agents' part of :func:`exercise`: a served ES1 world answered by agents on both their
+    paths, for every strategy a process runs. Also what the agent fork server runs once, so that
+    every agent it forks finds the kernels loaded (deploy/fork/server.py)."""
     from swarmloc.agents.epuck.agent import ForagingAgent
     from swarmloc.agents.epuck.foraging import ForagingBrain, agent_rng
     from swarmloc.agents.epuck.social_odometry import STRATEGIES
-    from swarmloc.deploy.lab.epuck.batch import run_batch
     from swarmloc.deploy.scenario import load_any
     from swarmloc.protocol.errors import ErrorCounter
     from swarmloc.protocol.messages import EpuckAct, EpuckSense, decode
     from swarmloc.world.service import served_world
 
     for name, strategy in STRATEGIES.items():
-        loaded = load_any("ES1", {"seed": 1}, [f'agent.strategy="{name}"', "world.robots=6",
-                                               f"world.duration_s={ticks / 10}"])
-        run_batch(loaded.scenario)
         if strategy.central:
             continue  # batch engine only
+        loaded = load_any("ES1", {"seed": 1}, [f'agent.strategy="{name}"', "world.robots=6",
+                                               f"world.duration_s={ticks / 10}"])
         sc, world, errors = loaded.scenario, served_world(loaded), ErrorCounter()
         agents = [ForagingAgent(ForagingBrain(sc.agent, sc.world.body, [rid], [agent_rng(sc.world.seed, rid)],
                                               sc.world.tick_s), rid)

@@ -3,11 +3,29 @@ guards that refuse swarms the protocol or the machine cannot hold."""
 
 from __future__ import annotations
 
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+import uuid
+from pathlib import Path
+
 import numpy as np
 import pytest
+from processes import run_swarmloc
 
+from swarmloc.config import ConfigError
+from swarmloc.deploy.fork.server import parse_robot_ids
 from swarmloc.deploy.lab.epuck.batch import run_batch
+from swarmloc.deploy.launch import supervised
+from swarmloc.deploy.run import check_memory, memory_estimate_mib, start_swarm
 from swarmloc.deploy.scenario import load_scenario
+from swarmloc.protocol.keys import Keys
+from swarmloc.protocol.messages import WorldState, decode
+from swarmloc.protocol.session import open_session, session_config
 from swarmloc.world.epuck import kernels
 from swarmloc.world.epuck.arena import area_at, arena_discs, resolve_collisions
 from swarmloc.world.epuck.foraging import ForagingWorld, WorldConfig, initial_poses, tile_grid
@@ -110,3 +128,236 @@ def test_batch_engine_takes_more_robots_than_the_wire_carries():
     assert scenario.world.robots > 65536
     with pytest.raises(ValueError, match="robots"):
         load_scenario("ES3-tiled", [f"world.robots={2**20 + 1}"])
+
+
+# -- agents forked from one warm agent server (deploy/fork/server.py) ----------------------------
+
+
+def test_robot_id_lists():
+    assert parse_robot_ids("0-3,7") == [0, 1, 2, 3, 7]
+    assert parse_robot_ids("5") == [5]
+    for bad in ("3-1", "a", "1,1", "-2", "0-", "65530-65536"):
+        with pytest.raises(ValueError, match="--robots"):
+            parse_robot_ids(bad)
+
+
+def _tcp_sockets_to(port: int) -> dict[int, str]:
+    """inode -> local address of every IPv4 TCP connection to 127.0.0.1:``port``."""
+    found = {}
+    with open("/proc/net/tcp", encoding="ascii") as f:
+        for line in f.readlines()[1:]:
+            fields = line.split()
+            local, remote, inode = fields[1], fields[2], int(fields[9])
+            if remote == f"0100007F:{port:04X}":
+                found[inode] = local
+    return found
+
+
+def _socket_inodes(pid: int) -> set[int]:
+    inodes = set()
+    for fd in os.listdir(f"/proc/{pid}/fd"):
+        try:
+            target = os.readlink(f"/proc/{pid}/fd/{fd}")
+        except OSError:
+            continue
+        if target.startswith("socket:["):
+            inodes.add(int(target[8:-1]))
+    return inodes
+
+
+def _ppid(pid: int) -> int:
+    with open(f"/proc/{pid}/stat", encoding="ascii") as f:
+        return int(f.read().rsplit(")", 1)[1].split()[1])
+
+
+def _alive(pid: int) -> bool:
+    """True while ``pid`` exists and is not a zombie."""
+    try:
+        with open(f"/proc/{pid}/stat", encoding="ascii") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+def _wait_gone(pids, timeout_s: float) -> list[int]:
+    """The pids still alive after ``timeout_s`` (polled: a process ending has no signal to wait on
+    for a non-parent)."""
+    deadline = time.monotonic() + timeout_s
+    while (left := [p for p in pids if _alive(p)]) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    return left
+
+
+def _es1_file(tmp_path, robots: int, duration_s: float) -> Path:
+    """An ES1 scenario file, and a logs/ folder beside it."""
+    (tmp_path / "logs").mkdir()
+    scenario = load_scenario("ES1", [f"world.robots={robots}", f"world.duration_s={duration_s}"])
+    path = tmp_path / "scenario.json"
+    path.write_text(json.dumps(scenario.to_dict()))
+    return path
+
+
+class _States:
+    """A client following a run's world states: the tests' readiness signal."""
+
+    def __init__(self, endpoint: str, run: str):
+        self.session = open_session(session_config(mode="client", connect=[endpoint]))
+        self.states: list[WorldState] = []
+        self._cond = threading.Condition()
+        self.session.declare_subscriber(Keys(run).world_state, self._on_state)
+
+    def _on_state(self, sample):
+        with self._cond:
+            self.states.append(decode(sample.payload.to_bytes(), WorldState))
+            self._cond.notify_all()
+
+    def wait_for(self, predicate, timeout_s: float = 60.0) -> bool:
+        with self._cond:
+            return self._cond.wait_for(lambda: any(predicate(s) for s in self.states), timeout_s)
+
+    def close(self):
+        self.session.close()
+
+
+@pytest.mark.integration
+def test_forked_agents_are_processes_with_their_own_sessions(tmp_path):
+    path = _es1_file(tmp_path, robots=4, duration_s=120.0)
+    run = "fork" + uuid.uuid4().hex[:8]
+    with supervised() as sup:
+        swarm = start_swarm(sup, path, run=run, robots=4, out=tmp_path / "out", log_dir=tmp_path / "logs",
+                            realtime=True, join_timeout_s=60)
+        states = _States(swarm.router_endpoint, run)
+        try:
+            assert states.wait_for(lambda s: s.tick > 0), "the run never started"
+            server = next(p for p in sup.procs if "agents" in p.args)
+            pids = [a.pid for a in swarm.agents]
+            assert len(set(pids)) == 4 and server.pid not in pids and swarm.world.pid not in pids
+            assert all(_ppid(p) == server.pid for p in pids), "each agent is a child of the agent server"
+            # Each agent holds its own TCP connection to the world's session: its own Zenoh session.
+            port = int(swarm.world_endpoint.rsplit(":", 1)[1])
+            to_world = _tcp_sockets_to(port)
+            mine = [_socket_inodes(p) & to_world.keys() for p in pids]
+            assert all(len(m) >= 1 for m in mine), mine
+            assert len(set().union(*mine)) == sum(len(m) for m in mine), "no connection is shared"
+            assert not _socket_inodes(server.pid) & to_world.keys(), "the server has no session"
+            assert all((tmp_path / "logs" / f"agent-{i}.log").exists() for i in range(4)), "a log each"
+            # An agent killed outright is seen dead by the world and by its handle; the run goes on.
+            os.kill(pids[1], signal.SIGKILL)
+            assert swarm.agents[1].wait(timeout=10) == -signal.SIGKILL
+            assert states.wait_for(lambda s: not s.alive[1], 30), "the world never saw the dead agent"
+            tick = states.states[-1].tick
+            assert states.wait_for(lambda s: s.tick >= tick + 20 and s.alive[0] and s.alive[3], 30)
+            assert swarm.agents[0].poll() is None
+        finally:
+            states.close()
+    assert not _wait_gone(pids, 10), "every agent ended with the run"
+
+
+@pytest.mark.integration
+def test_killed_agent_server_takes_its_agents_along(tmp_path):
+    path = _es1_file(tmp_path, robots=3, duration_s=120.0)
+    with supervised() as sup:
+        swarm = start_swarm(sup, path, run="forkk" + uuid.uuid4().hex[:8], robots=3, out=tmp_path / "out",
+                            log_dir=tmp_path / "logs", realtime=True, join_timeout_s=60)
+        pids = [a.pid for a in swarm.agents]
+        assert all(_alive(p) for p in pids)
+        server = next(p for p in sup.procs if "agents" in p.args)
+        os.kill(server.pid, signal.SIGKILL)  # the server, with no chance to pass a stop on
+        # PR_SET_PDEATHSIG: each agent gets SIGTERM from the kernel, closes its session and exits.
+        assert not _wait_gone(pids, 20), "agents outlived their server"
+
+
+@pytest.mark.integration
+def test_sigterm_to_swarmloc_run_leaves_no_agent_alive(tmp_path):
+    run = "forkt" + uuid.uuid4().hex[:8]
+    proc = subprocess.Popen([sys.executable, "-m", "swarmloc", "run", "ES1", "--robots", "5", "--realtime",
+                             "--duration-s", "300", "--out", str(tmp_path), "--run", run],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            stdin=subprocess.DEVNULL, start_new_session=True)
+    try:
+        endpoint = None
+        for line in proc.stderr:  # "router on ENDPOINT; run ..." once every piece is started
+            if line.startswith("router on "):
+                endpoint = line.split()[2].rstrip(";")
+                break
+        assert endpoint, "swarmloc run never said where its router is"
+        states = _States(endpoint, run)
+        try:
+            assert states.wait_for(lambda s: s.tick > 0), "the run never started"
+        finally:
+            states.close()
+        pieces = [int(p) for p in os.listdir("/proc") if p.isdigit() and _descends_from(int(p), proc.pid)]
+        agents = [p for p in pieces if _ppid(p) in pieces and "agents" in _cmdline(_ppid(p))]
+        assert len(agents) == 5, (pieces, agents)
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=30) != 0
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+        proc.stderr.close()
+        proc.stdout.close()
+    assert not _wait_gone(pieces, 10), "a piece outlived swarmloc run's SIGTERM"
+
+
+def _cmdline(pid: int) -> list[str]:
+    with open(f"/proc/{pid}/cmdline", "rb") as f:
+        return [a.decode() for a in f.read().split(b"\0") if a]
+
+
+def _descends_from(pid: int, root: int) -> bool:
+    try:
+        while pid > 1:
+            pid = _ppid(pid)
+            if pid == root:
+                return True
+    except OSError:
+        return False
+    return False
+
+
+# -- a swarm the machine's memory cannot hold ----------------------------------------------------
+
+
+def test_memory_check_refuses_what_does_not_fit_and_names_the_estimate():
+    check_memory(100, "foraging", available_mib=24 * 1024)  # fits: no error
+    with pytest.raises(ConfigError) as refused:
+        check_memory(100, "foraging", available_mib=1000)
+    text = str(refused.value)
+    per_agent = memory_estimate_mib(100, "foraging")[0]
+    assert per_agent >= 6.9, "at least what a forked agent measured (bench_scale.py --memory 100)"
+    assert f"100 agents x {per_agent:.0f} MiB" in text and "1.0 GiB available" in text and "MemAvailable" in text
+    # a process agent costs more than a forked one
+    assert memory_estimate_mib(100, "laser")[0] > per_agent
+    check_memory(10 ** 6, "foraging", available_mib=None)  # nothing known: nothing refused
+
+
+def test_swarmloc_run_refuses_robots_beyond_memory_before_starting(tmp_path):
+    with open("/proc/meminfo", encoding="ascii") as f:
+        available_mib = next(int(ln.split()[1]) for ln in f if ln.startswith("MemAvailable:")) / 1024
+    robots = 60000  # needs far more than this machine has, even at 1 MiB an agent
+    assert robots > available_mib
+    done = run_swarmloc(["run", "ES3-tiled", "--robots", str(robots), "--out", str(tmp_path / "runs")],
+                        cwd=tmp_path, timeout_s=120)
+    assert done.returncode == 2
+    assert f"--robots {robots}" in done.stderr and "MemAvailable" in done.stderr
+    assert "GiB available" in done.stderr and "at most about" in done.stderr
+    assert not (tmp_path / "runs").exists(), "nothing started: not even a run folder"
+
+
+def test_agent_server_stopped_before_it_forks_exits_and_forks_nothing(tmp_path):
+    # `swarmloc run` starts the server before the world and hands it the world's endpoint on
+    # stdin; a run stopped before that (the world failed to start, Ctrl-C) must not leave it waiting.
+    proc = subprocess.Popen([sys.executable, "-m", "swarmloc", "agents", "--robots", "0-1", "-m", "client",
+                             "--run", "nofork", "--announce", "--connect-from-stdin", "--log-dir", str(tmp_path)],
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            start_new_session=True)
+    try:
+        proc.send_signal(signal.SIGTERM)
+        out, _ = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    assert proc.returncode in (128 + signal.SIGTERM, -signal.SIGTERM)
+    assert b"pid" not in out and not list(tmp_path.glob("agent-*.log"))

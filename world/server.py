@@ -54,6 +54,9 @@ class TickStats:
     late_acts: int = 0  # live robots whose act missed its tick (deadline or lockstep timeout)
     stale_acts: int = 0  # acts that arrived after their tick was closed
     overruns: int = 0
+    overruns_after_1s: int = 0  # those of ticks after the run's first wall second (start-up)
+    #: where each tick went: computing and putting the Senses, waiting for the Acts, stepping
+    phases_s: dict = field(default_factory=lambda: {"sense_put": [], "collect": [], "step": []})
 
     def summary(self) -> dict:
         d = np.array(self.tick_durations_s) if self.tick_durations_s else np.zeros(1)
@@ -75,6 +78,9 @@ class TickStats:
             "late_acts": self.late_acts,
             "stale_acts": self.stale_acts,
             "overruns": self.overruns,
+            "overruns_after_1s": self.overruns_after_1s,
+            **{f"{phase}_ms_p{q}": round(float(np.percentile(v, q)) * 1e3, 3) if v else None
+               for phase, v in self.phases_s.items() for q in (50, 99)},
         }
 
 
@@ -293,7 +299,9 @@ class WorldServer:
                 self.tap.sensed(senses)
                 self.stats.tap_cpu_s += time.thread_time() - c0
             started = time.monotonic()
+            t_sensed = time.perf_counter()
             self._collect(started)
+            t_collected = time.perf_counter()
             with self._cond:
                 self._current_tick = -1  # acts arriving now are late
                 self.stats.late_acts += int((~self._got & world.alive & self._live).sum())
@@ -305,7 +313,12 @@ class WorldServer:
                 self.tap.stepped(acts)
                 self.stats.tap_cpu_s += time.thread_time() - c0
             self.stats.ticks += 1
-            self.stats.tick_durations_s.append(time.perf_counter() - t0)
+            t_end = time.perf_counter()
+            self.stats.tick_durations_s.append(t_end - t0)
+            phases = self.stats.phases_s
+            phases["sense_put"].append(t_sensed - t0)
+            phases["collect"].append(t_collected - t_sensed)
+            phases["step"].append(t_end - t_collected)
             if world.tick % self.state_every_ticks == 0 or world.done:
                 self._publish_state()
             if self.checkpoint is not None and time.monotonic() >= next_checkpoint_at:
@@ -318,6 +331,8 @@ class WorldServer:
                     self._stop.wait(pause)
                 else:
                     self.stats.overruns += 1
+                    if time.perf_counter() - self.stats.started_s > 1.0:
+                        self.stats.overruns_after_1s += 1
         return self.finish("completed" if world.done else "stopped")
 
     def _publish_state(self) -> None:

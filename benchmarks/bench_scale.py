@@ -1,0 +1,300 @@
+"""Agent processes at scale on one machine (issue 20): their memory, start-up, and real time.
+
+``--memory N`` starts ``swarmloc run`` with N e-puck agents (forked from one warm agent server,
+deploy/fork/server.py) and prints the time from its start until every agent had joined (its
+liveliness token seen by a Zenoh session of this script on the run's router: an agent declares
+it once the world answered its join), then each agent's proportional (PSS) and resident (RSS)
+memory, mean and max, from ``/proc/PID/smaps_rollup``, sampled ``--settle-s`` after all joined.
+
+``--realtime N1 N2 ...`` runs each swarm size in real time (10 Hz) for ``--duration-s`` and
+prints the table: ticks/s, p50/p99 tick (ms, as the world-server measured them), overruns after
+the run's first second, the memory of the whole run's process tree (PSS), the CPU the agents
+(all together) and the world-server used, in cores, over a window mid-run, and where the
+world-server's ticks went (computing and putting the Senses, waiting for the Acts, stepping). After the sizes
+given it goes on by ``--step`` agents while 10 Hz holds (10.0 ticks/s, p99 under the 100 ms
+period, no overrun after the first second), up to ``--max``. Usage:
+
+    python benchmarks/bench_scale.py --memory 100
+    python benchmarks/bench_scale.py --realtime 100 200 300 [--duration-s 30] [--max 500]
+
+Big swarms hog a shared 2-core machine: each run prints the load average beside its figures.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import statistics
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+#: A run holds 10 Hz if it ticks at this rate or more, p99 under the period, no late overrun.
+HOLD_TICKS_PER_S = 9.95
+PERIOD_MS = 100.0
+
+
+def _ppid(pid: int) -> int | None:
+    try:
+        with open(f"/proc/{pid}/stat", encoding="ascii") as f:
+            return int(f.read().rsplit(")", 1)[1].split()[1])
+    except (OSError, ValueError, IndexError):
+        return None
+
+
+def descendants(root: int, parent: dict[int, int | None] | None = None) -> list[int]:
+    """Every live process under ``root`` (not itself), from /proc (or the ``parent`` map of one
+    scan of it: scanning /proc is slow on a loaded machine with a thousand processes)."""
+    if parent is None:
+        parent = {int(p): _ppid(int(p)) for p in os.listdir("/proc") if p.isdigit()}
+    children: dict[int, list[int]] = {}
+    for p, pp in parent.items():
+        children.setdefault(pp, []).append(p)
+    found, frontier = [], [root]
+    while frontier:
+        frontier = [k for p in frontier for k in children.get(p, [])]
+        found += frontier
+    return found
+
+
+def cmdline(pid: int) -> list[str]:
+    try:
+        with open(f"/proc/{pid}/cmdline", "rb") as f:
+            return [a.decode(errors="replace") for a in f.read().split(b"\0") if a]
+    except OSError:
+        return []
+
+
+def memory_kib(pid: int) -> tuple[int, int] | None:
+    """(PSS, RSS) of ``pid`` in KiB, from /proc/PID/smaps_rollup; None if it is gone."""
+    try:
+        with open(f"/proc/{pid}/smaps_rollup", encoding="ascii") as f:
+            fields = dict(line.split(":", 1) for line in f if ":" in line)
+        return int(fields["Pss"].split()[0]), int(fields["Rss"].split()[0])
+    except (OSError, KeyError, ValueError):
+        return None
+
+
+def cpu_s(pid: int) -> float:
+    """User + system CPU seconds ``pid`` has used so far (0 if it is gone)."""
+    try:
+        with open(f"/proc/{pid}/stat", encoding="ascii") as f:
+            fields = f.read().rsplit(")", 1)[1].split()
+        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    except (OSError, ValueError, IndexError):
+        return 0.0
+
+
+def pieces(run_pid: int) -> tuple[list[int], int | None]:
+    """The agents of a ``swarmloc run`` (the children of its agent server, ``swarmloc agents``)
+    and its world-server, from one scan of /proc."""
+    parent = {int(p): _ppid(int(p)) for p in os.listdir("/proc") if p.isdigit()}
+    children = [p for p, pp in parent.items() if pp == run_pid]
+    servers = [p for p in children if "agents" in cmdline(p)[3:4]]
+    world = next((p for p in children if "world" in cmdline(p)[3:4]), None)
+    return [p for p, pp in parent.items() if pp in servers], world
+
+
+def load() -> str:
+    return "load " + " ".join(f"{x:.1f}" for x in os.getloadavg())
+
+
+class Run:
+    """One ``swarmloc run`` in the background, with the time its agents took to join."""
+
+    def __init__(self, n: int, out: str, *, scenario: str, duration_s: float, realtime: bool):
+        self.n, self.run = n, f"scale{n}"
+        self.out = Path(out)
+        cmd = [sys.executable, "-m", "swarmloc", "run", scenario, "--robots", str(n), "--duration-s",
+               str(duration_s), "--out", out, "--run", self.run]
+        if realtime:
+            cmd.append("--realtime")
+        self.t0 = time.perf_counter()
+        self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                     stdin=subprocess.DEVNULL, start_new_session=True)
+        self.endpoint: str | None = None
+        self.stderr: list[str] = []
+        self._endpoint_seen = threading.Event()
+        self.all_joined = threading.Event()
+        self.joined_s: float | None = None
+        self.started_s: float | None = None
+        threading.Thread(target=self._read_stderr, daemon=True).start()
+
+    def _read_stderr(self) -> None:
+        for line in self.proc.stderr:
+            self.stderr.append(line)
+            if line.startswith("router on ") and self.endpoint is None:
+                self.started_s = time.perf_counter() - self.t0  # every piece started and forked
+                self.endpoint = line.split()[2].rstrip(";")
+                self._endpoint_seen.set()
+        self._endpoint_seen.set()
+
+    def watch_joins(self, timeout_s: float) -> float | None:
+        """Seconds from start until N agents' liveliness tokens were seen; None on a timeout."""
+        from swarmloc.protocol.keys import Keys
+        from swarmloc.protocol.session import open_session, session_config
+
+        self._endpoint_seen.wait(timeout_s)
+        if self.endpoint is None:
+            return None
+        live: set[int] = set()
+
+        def on_token(sample):
+            try:
+                robot = Keys.robot_id_from_key(str(sample.key_expr))
+            except ValueError:
+                return  # the world's token
+            live.add(robot)
+            if len(live) == self.n and not self.all_joined.is_set():
+                self.joined_s = time.perf_counter() - self.t0
+                self.all_joined.set()
+
+        # Closed only after the run (close_watch): closing it took seconds under load, which
+        # would have shifted the measurement window that follows.
+        self._session = open_session(session_config(mode="client", connect=[self.endpoint]))
+        self._sub = self._session.liveliness().declare_subscriber(Keys(self.run).alive_all, on_token,
+                                                                  history=True)
+        self.all_joined.wait(max(0.0, timeout_s - (time.perf_counter() - self.t0)))
+        return self.joined_s
+
+    def close_watch(self) -> None:
+        if getattr(self, "_session", None) is not None:
+            self._sub.undeclare()
+            self._session.close()
+            self._session = None
+
+    def memory(self) -> tuple[list[tuple[int, int]], int]:
+        """Each agent's (PSS, RSS) in KiB, and the PSS of the run's whole process tree."""
+        agents = [m for m in map(memory_kib, pieces(self.proc.pid)[0]) if m is not None]
+        tree = [m for m in map(memory_kib, [self.proc.pid, *descendants(self.proc.pid)]) if m is not None]
+        return agents, sum(pss for pss, _ in tree)
+
+    def stop(self) -> None:
+        self.close_watch()
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGTERM)  # swarmloc run stops every piece it started
+        try:
+            self.proc.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            os.killpg(self.proc.pid, signal.SIGKILL)
+            self.proc.wait()
+
+    def transport(self, timeout_s: float) -> dict | str:
+        try:
+            self.proc.wait(timeout=timeout_s)
+        except subprocess.TimeoutExpired:
+            self.stop()
+            return "timed out"
+        self.close_watch()
+        results = self.out / self.run / "results.json"
+        if self.proc.returncode != 0 or not results.exists():
+            return "".join(self.stderr).strip()[-300:] or f"exit {self.proc.returncode}"
+        return json.loads(results.read_text())["transport"]
+
+
+def mib(kib: float) -> str:
+    return f"{kib / 1024:.1f}"
+
+
+def bench_memory(n: int, scenario: str, settle_s: float, tmp: str) -> None:
+    print(f"# {n} agents, {scenario}: memory and start-up ({load()})")
+    run = Run(n, tmp, scenario=scenario, duration_s=600.0, realtime=True)
+    try:
+        joined = run.watch_joins(timeout_s=180.0)
+        if joined is None:
+            print(f"not all {n} agents joined within 180 s:", "".join(run.stderr)[-300:])
+            return
+        time.sleep(settle_s)  # a measurement window, not a readiness wait: the agents are ticking
+        agents, tree = run.memory()
+    finally:
+        run.stop()
+    pss = [p for p, _ in agents]
+    rss = [r for _, r in agents]
+    print(f"all {n} joined {joined:.1f} s after `swarmloc run` started "
+          f"(every piece started and every agent forked after {run.started_s:.1f} s)")
+    print(f"agents measured     : {len(agents)}")
+    print(f"PSS per agent (MiB) : mean {mib(statistics.mean(pss))}  max {mib(max(pss))}")
+    print(f"RSS per agent (MiB) : mean {mib(statistics.mean(rss))}  max {mib(max(rss))}")
+    print(f"whole run PSS (MiB) : {mib(tree)}  ({load()})")
+
+
+def phases(t: dict) -> str:
+    """Where the world-server's ticks went (world/server.py: TickStats.phases_s)."""
+    try:
+        return "/".join(f"{t[f'{p}_ms_p50']:.1f}" for p in ("sense_put", "collect", "step")) + " | " + \
+            "/".join(f"{t[f'{p}_ms_p99']:.1f}" for p in ("sense_put", "collect", "step"))
+    except (KeyError, TypeError):
+        return "-"
+
+
+def holds(t: dict) -> bool:
+    return (t["ticks_per_s"] or 0) >= HOLD_TICKS_PER_S and t["tick_ms_p99"] < PERIOD_MS \
+        and t["overruns_after_1s"] == 0
+
+
+def bench_realtime(sizes: list[int], scenario: str, duration_s: float, step: int, top: int, tmp: str) -> None:
+    print(f"{'agents':>6} {'ticks/s':>8} {'p50 ms':>7} {'p99 ms':>7} {'overruns>1s':>11} {'overruns':>8} "
+          f"{'late acts':>9} {'total MiB':>9} {'joined s':>8} {'holds':>5} {'cores agents/world':>18} "
+          f"{'sense/collect/step p50|p99 ms':>31}  load")
+    largest = None
+    queue = list(sizes)
+    while queue:
+        n = queue.pop(0)
+        load_before = load()
+        run = Run(n, tmp, scenario=scenario, duration_s=duration_s, realtime=True)
+        joined = run.watch_joins(timeout_s=180.0)
+        total = cores = None
+        if joined is not None:
+            # Mid-run: the tree's memory, and the CPU the agents and the world use over a window.
+            agents, world = pieces(run.proc.pid)
+            t_before = time.perf_counter()
+            before = sum(map(cpu_s, agents)), cpu_s(world) if world else 0.0
+            time.sleep(min(10.0, duration_s / 3))  # a measurement window, not a readiness wait
+            after = sum(map(cpu_s, agents)), cpu_s(world) if world else 0.0
+            window_s = time.perf_counter() - t_before
+            if run.proc.poll() is None:  # else the window was not inside the run: no figure
+                cores = [(b - a) / window_s for a, b in zip(before, after)]
+            total = run.memory()[1]
+        t = run.transport(timeout_s=duration_s * 3 + 120)
+        if isinstance(t, str):
+            print(f"{n:>6} failed: {t}")
+            break
+        ok = holds(t)
+        largest = n if ok else largest
+        print(f"{n:>6} {t['ticks_per_s']:>8} {t['tick_ms_p50']:>7} {t['tick_ms_p99']:>7} "
+              f"{t['overruns_after_1s']:>11} {t['overruns']:>8} {t['late_acts']:>9} "
+              f"{mib(total) if total else '-':>9} {f'{joined:.1f}' if joined else '-':>8} "
+              f"{'yes' if ok else 'no':>5} {'/'.join(f'{c:.2f}' for c in cores) if cores else '-':>18} "
+              f"{phases(t):>31}  {load_before} -> {load()}", flush=True)
+        if ok and not queue and n + step <= top:
+            queue.append(n + step)
+    print(f"largest swarm that held 10 Hz: {largest if largest else 'none'}")
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--memory", type=int, metavar="N", help="memory and start-up of N agents")
+    parser.add_argument("--realtime", type=int, nargs="+", metavar="N", help="real-time table for these sizes")
+    parser.add_argument("--scenario", default="ES3-tiled", help="ES3's density at any size (default)")
+    parser.add_argument("--duration-s", type=float, default=30.0, help="simulated (= wall) seconds per run")
+    parser.add_argument("--settle-s", type=float, default=5.0, help="ticking time before memory is read")
+    parser.add_argument("--step", type=int, default=100, help="growth while 10 Hz holds")
+    parser.add_argument("--max", type=int, default=600, help="largest swarm tried")
+    args = parser.parse_args()
+    if not args.memory and not args.realtime:
+        parser.error("give --memory N and/or --realtime N ...")
+    with tempfile.TemporaryDirectory() as tmp:
+        if args.memory:
+            bench_memory(args.memory, args.scenario, args.settle_s, tmp)
+        if args.realtime:
+            bench_realtime(args.realtime, args.scenario, args.duration_s, args.step, args.max, tmp)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,1 @@
+"""Agents forked from one warm process (``swarmloc agents``): see :mod:`.server`."""
