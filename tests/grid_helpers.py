@@ -13,9 +13,10 @@ from pathlib import Path
 from swarmloc.deploy.lab.executors import TIMING_COLUMNS
 from swarmloc.deploy.lab.experiment import load_spec, plan
 
-#: A smoke spec: ES1 at 30 simulated seconds, two strategies, two replications (4 jobs).
+#: A smoke spec (``name`` to fill in as well): ES1 at 30 simulated seconds, two strategies,
+#: two replications (4 jobs).
 SMALL = """\
-name = "small"
+name = "{name}"
 replications = {replications}
 seed = 1
 [[group]]
@@ -29,7 +30,7 @@ duration_s = {duration}
 
 def spec_file(tmp_path: Path, replications: int = 2, duration: float = 30.0) -> Path:
     path = tmp_path / f"small-{replications}-{duration:g}.toml"
-    path.write_text(textwrap.dedent(SMALL.format(replications=replications, duration=duration)))
+    path.write_text(textwrap.dedent(SMALL.format(name="small", replications=replications, duration=duration)))
     return path
 
 

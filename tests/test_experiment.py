@@ -8,7 +8,7 @@ import csv
 import textwrap
 
 import pytest
-from grid_helpers import read_rows
+from grid_helpers import SMALL, read_rows
 
 from swarmloc.config import ConfigError
 from swarmloc.deploy.lab.epuck.batch import run_batch
@@ -21,18 +21,8 @@ from swarmloc.deploy.lab.experiment import (
 )
 from swarmloc.deploy.scenario import load_scenario
 
-TINY = """\
-name = "tiny"
-replications = 2
-seed = 1
-
-[[group]]
-name = "g"
-scenarios = ["ES1"]
-duration_s = {duration}
-[group.grid]
-"agent.strategy" = ["NC", "SSGIKF"]
-"""
+#: The shared smoke spec under its own name, its duration left to each test.
+TINY = SMALL.format(name="tiny", replications=2, duration="{duration}")
 
 
 def write_spec(tmp_path, text: str, name: str = "spec.toml"):
