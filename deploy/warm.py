@@ -70,12 +70,17 @@ def _package_dirs() -> list[Path]:
 
 
 def kernel_sources() -> list[Path]:
-    """The package's source files that declare a cached numba kernel."""
+    """The package's source files that declare a cached numba kernel (a decorator line with
+    ``cache=True``; files that only mention it, this one included, are not kernels, and counting
+    them made every edit of theirs a full recompile)."""
+    import re
+
+    decorator = re.compile(r"^\s*@.*\bcache=True", flags=re.MULTILINE)
     found = []
     for folder in _package_dirs():
         for path in sorted(folder.rglob("*.py")):
             try:
-                if "cache=True" in path.read_text(encoding="utf-8"):
+                if decorator.search(path.read_text(encoding="utf-8")):
                     found.append(path)
             except OSError:
                 continue
