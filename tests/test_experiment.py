@@ -5,7 +5,9 @@ from __future__ import annotations
 
 import argparse
 import csv
+import re
 import textwrap
+from pathlib import Path
 
 import pytest
 from grid_helpers import SMALL, read_rows
@@ -117,7 +119,15 @@ def test_shipped_specs_load_and_plan():
     assert {"smoke", "social-odometry-000", "social-odometry-001"} <= set(shipped_specs())
     for name in shipped_specs():
         spec = load_spec(name)
-        jobs = plan(spec)
+        try:
+            jobs = plan(spec)
+        except ConfigError as exc:
+            # The MRCLAM data lives outside the repository (../shared/data). Without it the plan
+            # must refuse, naming the missing folder, rather than plan runs that cannot start.
+            missing = re.search(r"MRCLAM data set folder '([^']*)' does not exist", str(exc))
+            if missing is None or Path(missing.group(1)).is_dir():
+                raise
+            continue
         assert jobs, name
         assert len({(j.setting, j.seed) for j in jobs}) == len(jobs), name
 

@@ -79,7 +79,7 @@ def columns(spec: ExperimentSpec) -> list[str]:
 def settings(spec: ExperimentSpec) -> list[Setting]:
     """Every setting of a replay spec, validated; a missing data set folder is an error naming
     the folder (and how to give another)."""
-    out = []
+    out, folders = [], []
     for g in spec.group:
         for scenario_name, sid, grid, overrides in setting_grid(g):
             where = f"experiment '{spec.name}', group '{g.name}', setting '{sid}'"
@@ -89,17 +89,20 @@ def settings(spec: ExperimentSpec) -> list[Setting]:
                 scenario = load_replay_scenario(scenario_name, overrides)
             except (ConfigError, ValueError, TypeError) as exc:
                 raise ConfigError(f"{where}: {exc}") from None
-            folder = Path(scenario.dataset)
-            if not folder.is_dir():
-                raise ConfigError(
-                    f"{where}: the MRCLAM data set folder {scenario.dataset!r} does not exist "
-                    f"(looked for {folder.resolve()}); give its path with `--set dataset=PATH` "
-                    f"or the group's `dataset` (see ../shared/data/mrclam/SOURCE.md)")
+            folders.append((where, scenario.dataset))
             ticks = round((scenario.duration_s or 900.0) / scenario.dt_s)
             out.append(Setting(sid, g.name, scenario_name, tuple(overrides), grid,
                                config_hash(scenario), 5, scenario.duration_s or 900.0,
                                scenario.config().label,
                                cost=5 * ticks * _COST.get(scenario.algorithm, 4)))
+    # Folders last: a wrong value anywhere in the spec is named first, data set or not.
+    for where, dataset in folders:
+        folder = Path(dataset)
+        if not folder.is_dir():
+            raise ConfigError(
+                f"{where}: the MRCLAM data set folder {dataset!r} does not exist "
+                f"(looked for {folder.resolve()}); give its path with `--set dataset=PATH` "
+                f"or the group's `dataset` (see ../shared/data/mrclam/SOURCE.md)")
     return out
 
 
