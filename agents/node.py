@@ -131,14 +131,23 @@ class AgentNode:
         self._act_pub = s.declare_publisher(
             k.act(self.robot_id), congestion_control=zenoh.CongestionControl.BLOCK
         )
-        self._decls.append(s.declare_subscriber(k.run_end, self._on_end))
+        # These two only set a flag: run on Zenoh's receiving thread (indirect=False), not on a
+        # Python thread of their own each, which every callback subscriber otherwise gets.
+        self._decls.append(s.declare_subscriber(k.run_end, _direct(self._on_end)))
         self._decls.append(
-            s.liveliness().declare_subscriber(k.world_alive, self._on_world_alive, history=True)
+            s.liveliness().declare_subscriber(k.world_alive, _direct(self._on_world_alive), history=True)
         )
         declare = getattr(self.brain, "declare", None)
         if declare is not None:  # a brain with keys of its own (vision agents' team keys)
             self._decls.extend(declare(s, k, self.errors))
-        self._decls.append(s.declare_subscriber(k.sense(self.robot_id), self._on_sense))
+        # A brain whose step is bounded and short (SENSE_ON_NETWORK_THREAD) answers on Zenoh's
+        # receiving thread too: no hand-over to a Python thread, two context switches fewer
+        # per tick. A long step there would stall that thread's link (keep-alives included),
+        # so the other brains keep a thread of their own.
+        on_sense = self._on_sense
+        if getattr(self.brain, "SENSE_ON_NETWORK_THREAD", False):
+            on_sense = _direct(on_sense)
+        self._decls.append(s.declare_subscriber(k.sense(self.robot_id), on_sense))
         # Declared last: the world sees us only once we can hear it.
         self._token = s.liveliness().declare_token(k.alive(self.robot_id))
 
@@ -154,6 +163,12 @@ class AgentNode:
             if now - self.last_sense_at > world_timeout_s:
                 return f"no sense from the world for {world_timeout_s:.0f} s"
         return self.end_reason
+
+
+def _direct(callback) -> zenoh.handlers.Callback:
+    """``callback`` run on the Zenoh thread that received the sample (no Python thread of its
+    own); for callbacks that return at once."""
+    return zenoh.handlers.Callback(callback, indirect=False)
 
 
 def run_agent(
