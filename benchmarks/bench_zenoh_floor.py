@@ -161,8 +161,8 @@ def robot(endpoint: str, run: str, robot_id: int, codec: bool = False, direct: b
 
 @contextmanager
 def _swarm(n: int, topology: str, settings: Settings):
-    """A world session and ``n`` robot processes, all joined: yields (session, run, robots); the
-    robots are told to end (``floor/<run>/end``) and reaped on the way out."""
+    """A world session and ``n`` robot processes, all joined: yields (session, run, robots, the
+    seconds they took to join); the robots are told to end (``floor/<run>/end``) and reaped on the way out."""
     run = f"r{os.getpid()}x{n}"
     procs: list[subprocess.Popen] = []
     try:
@@ -185,6 +185,7 @@ def _swarm(n: int, topology: str, settings: Settings):
                         joined.set()
 
             live = session.liveliness().declare_subscriber(f"floor/{run}/alive/*", on_alive, history=True)
+            t0 = time.perf_counter()
             env = {**os.environ, "ZENOH_RUNTIME": ONE_THREAD_ZENOH_RUNTIME} if settings.one_thread else None
             robots = [subprocess.Popen([sys.executable, __file__, "--robot", str(i), "--connect", robot_ep,
                                         "--run", run, *settings.robot_flags()],
@@ -193,7 +194,7 @@ def _swarm(n: int, topology: str, settings: Settings):
             procs.extend(robots)
             if not joined.wait(180):
                 raise RuntimeError(f"only {len(alive)} of {n} robots joined within 180 s")
-            yield session, run, robots
+            yield session, run, robots, time.perf_counter() - t0
             session.put(f"floor/{run}/end", b"")
             live.undeclare()
         if topology == "router":
@@ -211,7 +212,7 @@ def world(n: int, duration_s: float, topology: str, settings: Settings = Setting
     """Tick ``n`` robots for ``duration_s`` (lockstep, or at 10 Hz with ``realtime``); the
     figures: ticks/s, tick p50/p99, CPU of the world and of the robots, and in real time the
     overruns (ticks that ended after the next one was due) and late answers."""
-    with _swarm(n, topology, settings) as (session, run, robots):
+    with _swarm(n, topology, settings) as (session, run, robots, joined_s):
         pubs = [session.declare_publisher(f"floor/{run}/{i}/sense",
                                           congestion_control=zenoh.CongestionControl.BLOCK)
                 for i in range(n)]
@@ -271,7 +272,7 @@ def world(n: int, duration_s: float, topology: str, settings: Settings = Setting
         robot_cpu_s += float(cpu_s)
         robot_ticks += int(ticks)
     tick_s.sort()
-    return {"robots": n, "ticks": len(tick_s),
+    return {"robots": n, "ticks": len(tick_s), "joined_s": joined_s,
             "ticks_per_s": len(tick_s) / (wall_s if realtime else sum(tick_s)),
             "p50_ms": tick_s[len(tick_s) // 2] * 1e3, "p99_ms": tick_s[int(len(tick_s) * 0.99)] * 1e3,
             "late_acts": late, "overruns": overruns, "overruns_after_1s": overruns_after_1s,
@@ -293,7 +294,7 @@ def _cpu_and_wakeups(pid: int) -> tuple[float, int]:
 
 def idle(n: int, window_s: float, settings: Settings) -> dict:
     """What ``n`` connected robots cost doing nothing: CPU (µs/s) and wake-ups per second each."""
-    with _swarm(n, "direct", settings) as (_session, _run, robots):
+    with _swarm(n, "direct", settings) as (_session, _run, robots, _joined_s):
         time.sleep(2.0)  # a measurement's start, not a readiness wait: every robot has joined
         before = [_cpu_and_wakeups(p.pid) for p in robots]
         t0 = time.perf_counter()
