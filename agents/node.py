@@ -44,6 +44,10 @@ log = logging.getLogger("swarmloc.agent")
 WORLD_GONE = "the world-server is gone"
 #: Exit code of an agent whose world died (and did not come back within the grace period).
 EXIT_WORLD_GONE = 3
+#: How often the main thread looks at the run's end and the world's health while the callbacks
+#: work; a signal wakes it at once. Each look wakes the process: at 0.2 s that was about 20 µs
+#: of CPU per 10 Hz tick, a tenth of what an agent costs (benchmarks/bench_scale.py --realtime).
+WAIT_POLL_S = 1.0
 
 
 class JoinError(RuntimeError):
@@ -154,7 +158,7 @@ class AgentNode:
     def wait(self, stop: threading.Event, world_timeout_s: float, world_grace_s: float) -> str:
         """Wait until the run ends, we are told to stop, or the world is gone or silent too long."""
         while not self.done.is_set():
-            if stop.wait(0.2):
+            if stop.wait(WAIT_POLL_S):
                 return "signal"
             now = time.monotonic()
             lost = self.world_lost_at
