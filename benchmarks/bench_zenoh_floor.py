@@ -17,7 +17,8 @@ the robots the settings swarmloc's e-puck agents run with, one at a time: ``--on
 (the Zenoh runtime of ``deploy/launch.py: ONE_THREAD_ZENOH_RUNTIME``), ``--direct-callbacks``
 (the Sense callback on Zenoh's receiving thread, ``indirect=False``, agents/node.py),
 ``--shm-off`` (the shared-memory transport off, for the world too, protocol/session.py);
-``--as-agents`` sets all three: plain Zenoh configured as swarmloc configures it.
+``--as-agents`` sets all three, and the robots at nice 5 as ``swarmloc run`` starts agents that
+outnumber the cores: plain Zenoh configured as swarmloc configures it.
 
 ``--realtime`` ticks at 10 Hz on the wall clock, as the world-server's real-time mode does (a
 tick waits for the answers until its period is over; an answer that comes later is dropped),
@@ -63,20 +64,26 @@ class Settings:
     one_thread: bool = False
     direct: bool = False
     shm_off: bool = False
+    #: the robots' CPU priority (``swarmloc run`` starts agents at nice 5 when they outnumber
+    #: the cores: on a machine shared with other work, a floor at nice 0 would be favoured)
+    nice: int = 0
 
     def robot_flags(self) -> list[str]:
         return [flag for flag, on in (("--codec", self.codec), ("--direct-callbacks", self.direct),
-                                      ("--shm-off", self.shm_off)) if on]
+                                      ("--shm-off", self.shm_off)) if on] + \
+            (["--nice", str(self.nice)] if self.nice else [])
 
     def describe(self) -> str:
         parts = [("robots decode a Sense and encode an Act", self.codec),
                  ("robots on a one-thread Zenoh runtime", self.one_thread),
-                 ("direct Sense callbacks", self.direct), ("shared memory off", self.shm_off)]
+                 ("direct Sense callbacks", self.direct), ("shared memory off", self.shm_off),
+                 (f"robots at nice {self.nice}", self.nice)]
         return "".join(f", {text}" for text, on in parts if on)
 
 
-#: Plain Zenoh configured as ``swarmloc run`` configures its e-puck agents and world.
-AS_AGENTS = Settings(one_thread=True, direct=True, shm_off=True)
+#: Plain Zenoh configured, and its robots prioritised, as ``swarmloc run`` does for its e-puck
+#: agents and world when the agents outnumber the cores (deploy/run.py: start_swarm).
+AS_AGENTS = Settings(one_thread=True, direct=True, shm_off=True, nice=5)
 
 
 def _config(mode: str, *, listen: str | None = None, connect: str | None = None,
@@ -337,15 +344,19 @@ def main() -> int:
                         help="the shared-memory transport off (world and robots), as swarmloc's sessions")
     parser.add_argument("--as-agents", action="store_true",
                         help="all three: plain Zenoh configured as swarmloc's e-puck agents")
+    parser.add_argument("--nice", type=int, default=0, help="the robots' nice value (--as-agents: 5)")
     parser.add_argument("--realtime", action="store_true", help="tick at 10 Hz on the wall clock")
     parser.add_argument("--idle", action="store_true", help="robots' CPU and wake-ups with no ticks")
     args = parser.parse_args()
     if args.serve_router:
         return serve_router(args.serve_router)
     if args.robot is not None:
+        if args.nice:
+            os.nice(args.nice)
         return robot(args.connect, args.run, args.robot, args.codec, args.direct_callbacks, args.shm_off)
     settings = Settings(codec=args.codec, one_thread=args.one_thread_robots or args.as_agents,
-                        direct=args.direct_callbacks or args.as_agents, shm_off=args.shm_off or args.as_agents)
+                        direct=args.direct_callbacks or args.as_agents, shm_off=args.shm_off or args.as_agents,
+                        nice=args.nice or (AS_AGENTS.nice if args.as_agents else 0))
     if args.idle:
         print(f"plain Zenoh robot processes, connected and idle{settings.describe()}")
         print(f"{'robots':>6} {'CPU us/s each':>14} {'wake-ups/s each':>16} {'threads':>8}")
