@@ -25,6 +25,10 @@ class AgentBrain(Protocol):
     """One robot's brain as the agent shell sees it."""
 
     sense_type: type
+    #: Optional (default False): True for a brain whose step is short and bounded (well under a
+    #: millisecond); the shell then runs it on Zenoh's receiving thread, saving a thread
+    #: hand-over per tick (agents/node.py: AgentNode.declare).
+    # SENSE_ON_NETWORK_THREAD: bool
 
     def act(self, sense: Any, errors: ErrorCounter) -> Any:
         """The Act answering ``sense``; a teammate's undecodable payload inside it is recorded

@@ -44,6 +44,10 @@ log = logging.getLogger("swarmloc.agent")
 WORLD_GONE = "the world-server is gone"
 #: Exit code of an agent whose world died (and did not come back within the grace period).
 EXIT_WORLD_GONE = 3
+#: How often the main thread looks at the run's end and the world's health while the callbacks
+#: work; a signal wakes it at once. Each look wakes the process: at 0.2 s that was about 20 µs
+#: of CPU per 10 Hz tick, a tenth of what an agent costs (benchmarks/bench_scale.py --realtime).
+WAIT_POLL_S = 1.0
 
 
 class JoinError(RuntimeError):
@@ -131,21 +135,30 @@ class AgentNode:
         self._act_pub = s.declare_publisher(
             k.act(self.robot_id), congestion_control=zenoh.CongestionControl.BLOCK
         )
-        self._decls.append(s.declare_subscriber(k.run_end, self._on_end))
+        # These two only set a flag: run on Zenoh's receiving thread (indirect=False), not on a
+        # Python thread of their own each, which every callback subscriber otherwise gets.
+        self._decls.append(s.declare_subscriber(k.run_end, _direct(self._on_end)))
         self._decls.append(
-            s.liveliness().declare_subscriber(k.world_alive, self._on_world_alive, history=True)
+            s.liveliness().declare_subscriber(k.world_alive, _direct(self._on_world_alive), history=True)
         )
         declare = getattr(self.brain, "declare", None)
         if declare is not None:  # a brain with keys of its own (vision agents' team keys)
             self._decls.extend(declare(s, k, self.errors))
-        self._decls.append(s.declare_subscriber(k.sense(self.robot_id), self._on_sense))
+        # A brain whose step is bounded and short (SENSE_ON_NETWORK_THREAD) answers on Zenoh's
+        # receiving thread too: no hand-over to a Python thread, two context switches fewer
+        # per tick. A long step there would stall that thread's link (keep-alives included),
+        # so the other brains keep a thread of their own.
+        on_sense = self._on_sense
+        if getattr(self.brain, "SENSE_ON_NETWORK_THREAD", False):
+            on_sense = _direct(on_sense)
+        self._decls.append(s.declare_subscriber(k.sense(self.robot_id), on_sense))
         # Declared last: the world sees us only once we can hear it.
         self._token = s.liveliness().declare_token(k.alive(self.robot_id))
 
     def wait(self, stop: threading.Event, world_timeout_s: float, world_grace_s: float) -> str:
         """Wait until the run ends, we are told to stop, or the world is gone or silent too long."""
         while not self.done.is_set():
-            if stop.wait(0.2):
+            if stop.wait(WAIT_POLL_S):
                 return "signal"
             now = time.monotonic()
             lost = self.world_lost_at
@@ -154,6 +167,12 @@ class AgentNode:
             if now - self.last_sense_at > world_timeout_s:
                 return f"no sense from the world for {world_timeout_s:.0f} s"
         return self.end_reason
+
+
+def _direct(callback) -> zenoh.handlers.Callback:
+    """``callback`` run on the Zenoh thread that received the sample (no Python thread of its
+    own); for callbacks that return at once."""
+    return zenoh.handlers.Callback(callback, indirect=False)
 
 
 def run_agent(

@@ -5,7 +5,9 @@ ticks per second and the tick time percentiles the world-server measured. With `
 each swarmloc run is paired with a run of the plain-Zenoh floor of the same size
 (benchmarks/bench_zenoh_floor.py: a lockstep world and N robots that answer at once, no swarmloc
 code), alternating ``--repeat`` times, so that both see the same machine in the same minutes; it
-prints each pair and swarmloc's rate as a share of the floor's. ``--null-brain`` runs agents that
+prints each pair and swarmloc's rate as a share of the floor's (``--floor-as-agents``: a floor
+whose Zenoh is configured as swarmloc's e-puck agents', bench_zenoh_floor.py --as-agents, instead
+of Zenoh's defaults). ``--null-brain`` runs agents that
 answer each Sense with a standstill Act (`swarmloc run --null-brains`): what an agent process
 costs without its brain. Usage:
 
@@ -53,6 +55,8 @@ def main() -> int:
                         help="pair each run with a plain-Zenoh floor run of the same size")
     parser.add_argument("--repeat", type=int, default=1, help="runs per size (alternating with the floor)")
     parser.add_argument("--floor-s", type=float, default=15.0, help="wall seconds of each floor run")
+    parser.add_argument("--floor-as-agents", action="store_true",
+                        help="the floor's Zenoh configured as swarmloc's e-puck agents' (default: Zenoh's)")
     parser.add_argument("--null-brain", action="store_true",
                         help="agents answer with a standstill Act instead of running their brains")
     args = parser.parse_args()
@@ -61,7 +65,10 @@ def main() -> int:
     floor_world = None
     if args.with_floor:
         sys.path.insert(0, str(HERE))
+        from bench_zenoh_floor import AS_AGENTS, Settings
         from bench_zenoh_floor import world as floor_world
+
+        floor_settings = AS_AGENTS if args.floor_as_agents else Settings()
     mode = ("realtime" if args.realtime else "lockstep") + ("/null" if args.null_brain else "")
     head = f"{'robots':>6} {'mode':>13} {'ticks':>6} {'ticks/s':>8} {'p50 ms':>7} {'p99 ms':>7} {'late':>5} {'overruns':>8}"
     print(head + (f" {'floor ticks/s':>13} {'share':>6}" if args.with_floor else ""))
@@ -69,7 +76,7 @@ def main() -> int:
         for n in args.robots:
             shares = []
             for _ in range(args.repeat):
-                floor = floor_world(n, args.floor_s, "direct") if floor_world else None
+                floor = floor_world(n, args.floor_s, "direct", floor_settings) if floor_world else None
                 t = swarmloc_run(n, args.scenario, args.duration_s, args.realtime, tmp, args.null_brain)
                 if isinstance(t, str):
                     print(f"{n:>6} failed: {t}")

@@ -12,10 +12,15 @@ the run's first second, the memory of the whole run's process tree (PSS), the CP
 (all together) and the world-server used, in cores, over a window mid-run, and where the
 world-server's ticks went (computing and putting the Senses, waiting for the Acts, stepping). After the sizes
 given it goes on by ``--step`` agents while 10 Hz holds (10.0 ticks/s, p99 under the 100 ms
-period, no overrun after the first second), up to ``--max``. Usage:
+period, no overrun after the first second), up to ``--max``, and prints the largest swarm that
+held. With ``--floor`` each size also runs the plain-Zenoh floor in real time, right after
+(benchmarks/bench_zenoh_floor.py: the same 10 Hz loop, one 100-byte message each way per robot
+and tick, robots that do nothing else, Zenoh configured as swarmloc's e-puck agents): if the
+floor cannot hold 10 Hz at a size on this machine, swarmloc cannot either. ``--floor-only``
+runs the floor alone. Usage:
 
     python benchmarks/bench_scale.py --memory 100
-    python benchmarks/bench_scale.py --realtime 100 200 300 [--duration-s 30] [--max 500]
+    python benchmarks/bench_scale.py --realtime 100 200 300 [--duration-s 30] [--max 500] [--floor]
 
 Big swarms hog a shared 2-core machine: each run prints the load average beside its figures.
 """
@@ -237,43 +242,84 @@ def holds(t: dict) -> bool:
         and t["overruns_after_1s"] == 0
 
 
-def bench_realtime(sizes: list[int], scenario: str, duration_s: float, step: int, top: int, tmp: str) -> None:
-    print(f"{'agents':>6} {'ticks/s':>8} {'p50 ms':>7} {'p99 ms':>7} {'overruns>1s':>11} {'overruns':>8} "
-          f"{'late acts':>9} {'total MiB':>9} {'joined s':>8} {'holds':>5} {'cores agents/world':>18} "
-          f"{'sense/collect/step p50|p99 ms':>31}  load")
-    largest = None
+def floor_row(n: int, duration_s: float) -> bool:
+    """One real-time run of the plain-Zenoh floor with ``n`` robots, printed as a table row;
+    whether it held 10 Hz."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from bench_zenoh_floor import AS_AGENTS, world
+
+    load_before = load()
+    try:
+        f = world(n, duration_s, "direct", AS_AGENTS, realtime=True)
+    except RuntimeError as exc:
+        print(f"{n:>6} {'floor':>8} failed: {exc}", flush=True)
+        return False
+    t = {"ticks_per_s": round(f["ticks_per_s"], 2), "tick_ms_p99": f["p99_ms"],
+         "overruns_after_1s": f["overruns_after_1s"]}
+    ok = holds(t)
+    cores = f"{f['cores_robots']:.2f}/{f['cores_world']:.2f}"
+    print(f"{n:>6} {'floor':>8} {t['ticks_per_s']:>8} {f['p50_ms']:>7.1f} {f['p99_ms']:>7.1f} "
+          f"{f['overruns_after_1s']:>11} {f['overruns']:>8} {f['late_acts']:>9} {'-':>9} "
+          f"{f['joined_s']:>8.1f} {'yes' if ok else 'no':>5} {cores:>18} {'-':>31}  "
+          f"{load_before} -> {load()}", flush=True)
+    return ok
+
+
+def bench_realtime(sizes: list[int], scenario: str, duration_s: float, step: int, top: int, tmp: str,
+                   engines: tuple[str, ...] = ("swarmloc",)) -> None:
+    print(f"{'agents':>6} {'engine':>8} {'ticks/s':>8} {'p50 ms':>7} {'p99 ms':>7} {'overruns>1s':>11} "
+          f"{'overruns':>8} {'late acts':>9} {'total MiB':>9} {'joined s':>8} {'holds':>5} "
+          f"{'cores agents/world':>18} {'sense/collect/step p50|p99 ms':>31}  load")
+    largest: dict[str, int | None] = dict.fromkeys(engines)
     queue = list(sizes)
     while queue:
         n = queue.pop(0)
-        load_before = load()
-        run = Run(n, tmp, scenario=scenario, duration_s=duration_s, realtime=True)
-        joined = run.watch_joins(timeout_s=180.0)
-        total = cores = None
-        if joined is not None:
-            # Mid-run: the tree's memory, and the CPU the agents and the world use over a window.
-            agents, world = pieces(run.proc.pid)
-            t_before = time.perf_counter()
-            before = sum(map(cpu_s, agents)), cpu_s(world) if world else 0.0
-            time.sleep(min(10.0, duration_s / 3))  # a measurement window, not a readiness wait
-            after = sum(map(cpu_s, agents)), cpu_s(world) if world else 0.0
-            window_s = time.perf_counter() - t_before
-            if run.proc.poll() is None:  # else the window was not inside the run: no figure
-                cores = [(b - a) / window_s for a, b in zip(before, after)]
-            total = run.memory()[1]
-        t = run.transport(timeout_s=duration_s * 3 + 120)
-        if isinstance(t, str):
-            print(f"{n:>6} failed: {t}")
-            break
-        ok = holds(t)
-        largest = n if ok else largest
-        print(f"{n:>6} {t['ticks_per_s']:>8} {t['tick_ms_p50']:>7} {t['tick_ms_p99']:>7} "
-              f"{t['overruns_after_1s']:>11} {t['overruns']:>8} {t['late_acts']:>9} "
-              f"{mib(total) if total else '-':>9} {f'{joined:.1f}' if joined else '-':>8} "
-              f"{'yes' if ok else 'no':>5} {'/'.join(f'{c:.2f}' for c in cores) if cores else '-':>18} "
-              f"{phases(t):>31}  {load_before} -> {load()}", flush=True)
-        if ok and not queue and n + step <= top:
+        held = False
+        if "swarmloc" in engines:
+            ok = swarmloc_row(n, scenario, duration_s, tmp)
+            if ok is None:
+                break
+            largest["swarmloc"] = n if ok else largest["swarmloc"]
+            held |= ok
+        if "floor" in engines:
+            ok = floor_row(n, duration_s)
+            largest["floor"] = n if ok else largest["floor"]
+            held |= ok
+        if held and not queue and n + step <= top:
             queue.append(n + step)
-    print(f"largest swarm that held 10 Hz: {largest if largest else 'none'}")
+    print("largest swarm that held 10 Hz: " + ", ".join(
+        f"{'plain-Zenoh floor' if e == 'floor' else e} {largest[e] or 'none'}" for e in engines))
+
+
+def swarmloc_row(n: int, scenario: str, duration_s: float, tmp: str) -> bool | None:
+    """One real-time ``swarmloc run`` of ``n`` agents, printed as a table row; whether it held
+    10 Hz (None: it failed)."""
+    load_before = load()
+    run = Run(n, tmp, scenario=scenario, duration_s=duration_s, realtime=True)
+    joined = run.watch_joins(timeout_s=180.0)
+    total = cores = None
+    if joined is not None:
+        # Mid-run: the tree's memory, and the CPU the agents and the world use over a window.
+        agents, world = pieces(run.proc.pid)
+        t_before = time.perf_counter()
+        before = sum(map(cpu_s, agents)), cpu_s(world) if world else 0.0
+        time.sleep(min(10.0, duration_s / 3))  # a measurement window, not a readiness wait
+        after = sum(map(cpu_s, agents)), cpu_s(world) if world else 0.0
+        window_s = time.perf_counter() - t_before
+        if run.proc.poll() is None:  # else the window was not inside the run: no figure
+            cores = [(b - a) / window_s for a, b in zip(before, after)]
+        total = run.memory()[1]
+    t = run.transport(timeout_s=duration_s * 3 + 120)
+    if isinstance(t, str):
+        print(f"{n:>6} {'swarmloc':>8} failed: {t}")
+        return None
+    ok = holds(t)
+    print(f"{n:>6} {'swarmloc':>8} {t['ticks_per_s']:>8} {t['tick_ms_p50']:>7} {t['tick_ms_p99']:>7} "
+          f"{t['overruns_after_1s']:>11} {t['overruns']:>8} {t['late_acts']:>9} "
+          f"{mib(total) if total else '-':>9} {f'{joined:.1f}' if joined else '-':>8} "
+          f"{'yes' if ok else 'no':>5} {'/'.join(f'{c:.2f}' for c in cores) if cores else '-':>18} "
+          f"{phases(t):>31}  {load_before} -> {load()}", flush=True)
+    return ok
 
 
 def main() -> int:
@@ -285,6 +331,9 @@ def main() -> int:
     parser.add_argument("--settle-s", type=float, default=5.0, help="ticking time before memory is read")
     parser.add_argument("--step", type=int, default=100, help="growth while 10 Hz holds")
     parser.add_argument("--max", type=int, default=600, help="largest swarm tried")
+    parser.add_argument("--floor", action="store_true",
+                        help="with --realtime: also the plain-Zenoh floor at each size")
+    parser.add_argument("--floor-only", action="store_true", help="with --realtime: the floor alone")
     args = parser.parse_args()
     if not args.memory and not args.realtime:
         parser.error("give --memory N and/or --realtime N ...")
@@ -292,7 +341,8 @@ def main() -> int:
         if args.memory:
             bench_memory(args.memory, args.scenario, args.settle_s, tmp)
         if args.realtime:
-            bench_realtime(args.realtime, args.scenario, args.duration_s, args.step, args.max, tmp)
+            engines = ("floor",) if args.floor_only else ("swarmloc", "floor") if args.floor else ("swarmloc",)
+            bench_realtime(args.realtime, args.scenario, args.duration_s, args.step, args.max, tmp, engines)
     return 0
 
 

@@ -10,6 +10,11 @@ them into a ``zenoh.Config`` with the settings that ZENOH.md measured to matter:
   scouting for nobody);
 - a client that connects to explicit endpoints waits for its router (``connect/timeout_ms: -1``)
   instead of failing at once when the router is not up yet;
+- the shared-memory transport off: swarmloc never allocates shared-memory buffers, and with it
+  on (Zenoh's default) every session polled for hand-overs about 20 times a second, idle or not:
+  750 µs of CPU a second per process, 75 µs per 10 Hz tick of each agent (measured with 20 idle
+  clients, benchmarks/bench_zenoh_floor.py --idle); off, 1.4 wake-ups a second and no
+  measurable CPU. A link between a session with it and one without simply does not use it;
 - a session that listens has its (read-only) admin space enabled, so that
   :func:`bound_endpoints` can read the port it actually got for ``tcp/127.0.0.1:0``;
 - a session with a ``tls/`` endpoint has its certificates checked first
@@ -110,6 +115,7 @@ def session_config(
     config_file: str | os.PathLike | None = None,
     multicast_scouting: bool | None = False,
     admin_space: bool | None = None,
+    shared_memory: bool | None = False,
 ) -> zenoh.Config:
     """A ``zenoh.Config`` for the transport flags.
 
@@ -123,6 +129,8 @@ def session_config(
     - ``admin_space``: True enables the read-only admin space (needed by
       :func:`bound_endpoints`), False disables it; None enables it when ``listen`` is given and
       otherwise leaves the file's setting;
+    - ``shared_memory``: the shared-memory transport on or off (default off); None leaves the
+      file's setting;
     - a client with connect endpoints waits for its router (``connect/timeout_ms: -1``) unless
       the file sets a timeout.
 
@@ -149,6 +157,8 @@ def session_config(
         if not multicast_scouting:
             _insert(config, "scouting/gossip/enabled", False)
             _insert(config, "scouting/delay", 0)
+    if shared_memory is not None:
+        _insert(config, "transport/shared_memory/enabled", bool(shared_memory))
     if admin_space is None and listen:
         admin_space = True
     if admin_space is not None:

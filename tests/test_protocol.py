@@ -734,6 +734,16 @@ def test_session_config_defaults():
     assert _get(scouting, "scouting/multicast/enabled") is True
 
 
+def test_session_config_turns_shared_memory_off_unless_told(tmp_path):
+    assert _get(zenoh.Config(), "transport/shared_memory/enabled") is True, "Zenoh's default is on"
+    assert _get(session_config(), "transport/shared_memory/enabled") is False
+    assert _get(session_config(shared_memory=True), "transport/shared_memory/enabled") is True
+    on = tmp_path / "shm.json5"
+    on.write_text('{transport: {shared_memory: {enabled: true}}}')
+    assert _get(session_config(config_file=on), "transport/shared_memory/enabled") is False
+    assert _get(session_config(config_file=on, shared_memory=None), "transport/shared_memory/enabled") is True
+
+
 @pytest.mark.parametrize(
     "endpoint",
     [

@@ -219,6 +219,16 @@ class _States:
         self.session.close()
 
 
+def _python_threads(pid: int) -> int:
+    """Threads of ``pid`` named as its main thread (Python's threads, not Zenoh's named ones)."""
+    def name(tid: str) -> str:
+        with open(f"/proc/{pid}/task/{tid}/comm", encoding="utf-8") as f:
+            return f.read().strip()
+
+    main = name(str(pid))
+    return sum(name(tid) == main for tid in os.listdir(f"/proc/{pid}/task"))
+
+
 @pytest.mark.integration
 def test_forked_agents_are_processes_with_their_own_sessions(tmp_path):
     path = _es1_file(tmp_path, robots=4, duration_s=120.0)
@@ -241,6 +251,10 @@ def test_forked_agents_are_processes_with_their_own_sessions(tmp_path):
             assert len(set().union(*mine)) == sum(len(m) for m in mine), "no connection is shared"
             assert not _socket_inodes(server.pid) & to_world.keys(), "the server has no session"
             assert all((tmp_path / "logs" / f"agent-{i}.log").exists() for i in range(4)), "a log each"
+            # One Python thread each, the main one: Zenoh's worker runs the callbacks
+            # (agents/node.py: direct callbacks), no Python thread per subscriber. Threads a
+            # process starts share its name; Zenoh names its own (app-0, ...).
+            assert [_python_threads(p) for p in pids] == [1] * 4
             # An agent killed outright is seen dead by the world and by its handle; the run goes on.
             os.kill(pids[1], signal.SIGKILL)
             assert swarm.agents[1].wait(timeout=10) == -signal.SIGKILL

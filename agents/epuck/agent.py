@@ -18,6 +18,9 @@ class ForagingAgent:
     """The e-puck foraging controller with social odometry (seeds 000/001) for one robot."""
 
     sense_type = EpuckSense
+    #: A tick costs tens of microseconds (benchmarks/bench_agent_tick.py): the shell may run it
+    #: on Zenoh's receiving thread (agents/node.py: AgentNode.declare).
+    SENSE_ON_NETWORK_THREAD = True
 
     def __init__(self, brain, robot_id: int, *, packed: bool = True) -> None:
         """``packed``: step the brain as one compiled call per tick (agents/epuck/agent_tick.py) when it
@@ -169,6 +172,7 @@ class StandstillAgent:
     agent process costs without its brain (benchmarks/bench_lockstep.py --null-brain)."""
 
     sense_type = EpuckSense
+    SENSE_ON_NETWORK_THREAD = True
 
     def __init__(self, robot_id: int) -> None:
         self.robot_id = robot_id
