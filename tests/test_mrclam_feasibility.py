@@ -164,3 +164,17 @@ def test_ekf_params_reject_a_bad_odometry_prior():
         EkfParams(odometry_prior_std=(0.1, 0.1))
     with pytest.raises(ValueError, match="odometry_drift_std"):
         EkfParams(odometry_drift_std=(0.1, -1.0, 0.1))
+
+
+def test_report_bound_table_lists_each_robot_and_the_share_within_60_s():
+    """The report's table (``deploy/lab/replay/report.py``): the hard bound alone is robot 1's
+    first landmark reading (1 s), robot 2's (2 s) and never for robot 3 ('-'): 2 of 3 robots
+    (67 %) within 60 s; cooperatively robot 3's first is its reading at 6 s (3/3)."""
+    from swarmloc.deploy.lab.replay.report import bound_table
+
+    lines = bound_table(_dataset())
+    alone = next(line for line in lines if line.startswith("| first reading (hard bound), alone"))
+    coop = next(line for line in lines
+                if line.startswith("| first reading (hard bound), cooperative"))
+    assert alone.split("|")[2:6] == [" 1.0 ", " 2.0 ", " - ", " 67% "]
+    assert coop.split("|")[2:6] == [" 1.0 ", " 2.0 ", " 6.0 ", " 100% "]
