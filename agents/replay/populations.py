@@ -22,6 +22,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
+from swarmloc.agents.replay.fixes import ReadingBuffer
 from swarmloc.agents.replay.localizers import (
     _NO_ROWS,
     MAX_REPORT_SAMPLES,
@@ -151,6 +152,24 @@ class PfParams:
     #: fits a reading within one std in range and bearing scores ``exp(-1) = 0.37``.
     reset_threshold: float = 0.02
     reset_smoothing: float = 0.3
+    #: Sensor resetting draws from the pose fixed by the landmark readings of the last
+    #: ``fix_window_s`` seconds when they hold two distinct landmarks
+    #: (:class:`~swarmloc.agents.replay.fixes.ReadingBuffer`, mixture MCL's dual proposal),
+    #: from one reading's circle otherwise (issue 19). Off: on Dataset 6 (unknown start, seeds
+    #: 0-3, 180 s) it localized 5/20 robots within 60 s alone and 8/20 cooperative, against
+    #: 6/20 and 10/20 without it: the first landmarks most robots see are close together and
+    #: far away (robot 1: landmarks 14 and 15, 0.18 m apart, at 6.5 m), so the fix pins the
+    #: pose no better than one reading (see ``deploy/lab/replay/feasibility.py``).
+    fix_proposal: bool = False
+    fix_window_s: float = 2.0
+    #: With recovery and ``fix_proposal``: on every tick with readings whose fix lies more than
+    #: ``fix_disagreement_m`` from the estimate, this share of the particles is drawn from the
+    #: fix whatever the fit (mixture MCL's fixed mixing ratio): a set collapsed onto a wrong
+    #: pose that fits the readings tolerably is otherwise never reset. Off (0): with 0.05, on
+    #: the same runs, 1/20 alone and 0/20 cooperative within 60 s (fixes from far, close
+    #: landmarks and odometry-carried readings throw a tracked estimate off).
+    fix_mixing: float = 0.0
+    fix_disagreement_m: float = 0.5
 
     def __post_init__(self):
         if not 0.0 < _real(self.resample_ess_fraction, "resample_ess_fraction") <= 1.0:
@@ -161,6 +180,9 @@ class PfParams:
             raise ValueError(f"reset_threshold must be in [0, 1), got {self.reset_threshold}")
         if not 0.0 < _real(self.reset_smoothing, "reset_smoothing") <= 1.0:
             raise ValueError(f"reset_smoothing must be in (0, 1], got {self.reset_smoothing}")
+        if not isinstance(self.fix_proposal, bool):
+            raise TypeError(f"fix_proposal must be true or false, got {self.fix_proposal!r}")
+        _real(self.fix_window_s, "fix_window_s", positive=True)
 
 
 def sensor_resetting_poses(n: int, rng: np.random.Generator, landmarks_xy: np.ndarray,
@@ -235,6 +257,9 @@ class ParticleFilterLocalizer:
         low, high = np.array([x0, y0, -math.pi]), np.array([x1, y1, math.pi])
 
         def sample_area(n: int, generator: np.random.Generator) -> np.ndarray:
+            fixed = self._fix_poses(n, generator)
+            if fixed is not None:
+                return fixed
             if self.params.sensor_resetting and self._last_readings is not None:
                 return sensor_resetting_poses(n, generator, *self._last_readings, setup.camera,
                                               setup.bounds_m)
@@ -261,6 +286,27 @@ class ParticleFilterLocalizer:
         #: many particles were replaced so far.
         self.fit = 1.0 if setup.initial_area_m is None else 0.0
         self.resets = 0
+        self._buffer = ReadingBuffer(self.params.fix_window_s)
+        self._rng = rng  # the core's generator too: one stream per robot
+
+    def _mix_fix(self, core) -> None:
+        """Mixture MCL's fixed share of particles from the fix, when it disagrees with the
+        estimate (see :class:`PfParams`)."""
+        probe = self._buffer.fix_poses(16, self._rng) if self._buffer.distinct_landmarks() >= 2 \
+            else None
+        if probe is None:
+            return
+        centre = np.median(probe[:, :2], axis=0)
+        if float(np.hypot(*(centre - self._pose[:2]))) <= self.params.fix_disagreement_m:
+            return
+        n_mix = max(1, int(core.n_particles * self.params.fix_mixing))
+        self.resets += core.replace_random(n_mix, lambda n, g: self._buffer.fix_poses(n, g))
+
+    def _fix_poses(self, n: int, generator: np.random.Generator) -> np.ndarray | None:
+        """Poses from the buffered readings' fix (None: no fix, or not asked)."""
+        if not (self.params.sensor_resetting and self.params.fix_proposal):
+            return None
+        return self._buffer.fix_poses(n, generator)
 
     def _core(self, dt_s: float):
         """The AMCL core; its per-step motion noise is fixed when it is built, so it is built
@@ -286,6 +332,7 @@ class ParticleFilterLocalizer:
         core = self._core(dt)
         distance, turn = obs.odometry_v_mps * dt, obs.odometry_omega_rad_s * dt
         core.predict(distance, turn)
+        self._buffer.move(distance, turn, dt)
         self._pose = unicycle(self._pose[None, :], distance, turn)[0]
         std_d, std_t = setup.motion.tick_std(obs.odometry_v_mps, obs.odometry_omega_rad_s, dt)
         self._cov = self._cov + _motion_growth(std_d, std_t)
@@ -297,6 +344,7 @@ class ParticleFilterLocalizer:
                 lm_xy, rng_m = xy[known], obs.landmark_range_m[known]
                 bearing = obs.landmark_bearing_rad[known]
                 self._last_readings = (lm_xy, rng_m, bearing)
+                self._buffer.add(obs.landmark_ids[known], lm_xy, rng_m, bearing, camera)
                 # One correction per reading: the recovery averages (w_slow, w_fast) then
                 # compare likelihoods of one reading each, not of frames with 1 or 4 readings.
                 resetting = self.amcl_params.recovery and self.params.sensor_resetting
@@ -309,10 +357,15 @@ class ParticleFilterLocalizer:
                                          * camera.bearing_std_rad)
                         a = self.params.reset_smoothing
                         self.fit = (1 - a) * self.fit + a * math.exp(min(log_w_avg - peak, 0.0))
+                if resetting and self.params.fix_proposal and self.params.fix_mixing > 0.0 and \
+                        self.fit >= self.params.reset_threshold:
+                    self._mix_fix(core)
                 if resetting and self.fit < self.params.reset_threshold:
                     n_reset = int(core.n_particles * (1.0 - self.fit / self.params.reset_threshold))
-                    self.resets += core.replace_random(n_reset, lambda n, g: sensor_resetting_poses(
-                        n, g, lm_xy, rng_m, bearing, camera, setup.bounds_m))
+                    self.resets += core.replace_random(n_reset, lambda n, g: (
+                        self._fix_poses(n, g) if self._buffer.distinct_landmarks() >= 2
+                        and self.params.fix_proposal else sensor_resetting_poses(
+                            n, g, lm_xy, rng_m, bearing, camera, setup.bounds_m)))
             for reading in readings:
                 core.reweight(_mixture(
                     teammate_log_density(core.particles, reading, self._pose, self._cov, camera),
