@@ -330,7 +330,8 @@ class _Table:
                     continue
             elif default is not None and repr(value) == default:
                 continue
-            extras.append((column, value))
+            # A list value (a position) as a tuple: a variant is a dictionary key.
+            extras.append((column, tuple(value) if isinstance(value, list) else value))
         if self._group_key(row) in self._labelled_groups:
             extras.append((_GROUP_EXTRA, str(row.get("group"))))
         beta = row.get("beta") if _is_fermi(strategy) else None
