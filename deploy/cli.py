@@ -49,14 +49,17 @@ def _scenario_args(p: argparse.ArgumentParser, positional: bool = True) -> None:
     g.add_argument("--duration-s", type=float, help="simulated duration in seconds")
     g.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="any scenario value, e.g. --set world.medium.range_m=0.25 (repeatable)")
+    g.add_argument("--variant", default=None, metavar="NAME",
+                   help="a named set of overrides, applied before --set: v0-defaults (e-puck: "
+                        "the defaults before issue 18's readings of the seeds)")
 
 
 def load_from_args(args, any_family: bool = False):
     """The scenario named by the arguments, with every override applied and validated: an e-puck
     :class:`Scenario`, or with ``any_family`` an :class:`AnyScenario` of any robot family."""
-    from swarmloc.deploy.scenario import load_any
+    from swarmloc.deploy.scenario import load_any, variant_overrides
 
-    overrides = list(args.set)
+    overrides = variant_overrides(getattr(args, "variant", None)) + list(args.set)
     if args.scenario is None:
         args.scenario = DEFAULT_SCENARIO
         if getattr(args, "command", None) == "run" and args.duration_s is None:

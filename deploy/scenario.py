@@ -20,6 +20,35 @@ from swarmloc.world.epuck.foraging import WorldConfig
 
 DEFAULT_SCENARIO = "ES1"
 
+#: Named variants: scenario overrides that select a documented set of modelling choices at once
+#: (``swarmloc run/batch/world --variant NAME``; in an experiment spec, a group whose ``set``
+#: spells the same values, which tests/test_scenario.py holds to this table).
+#:
+#: ``v0-defaults``: the e-puck defaults before issue 18, with which docs/social-odometry-000/ and
+#: -001/ were first made. Today's defaults are the readings of seeds 000 and 001 that their text
+#: supports (each quoted where it is implemented: ``AgentConfig.p_after_fusion``, ``sends``,
+#: ``give_up_factor``, ``encounter_memory``, ``odometry_k_m``, ``OdometryConfig.substeps``); the
+#: ablation behind them is docs/so-000-readings/.
+VARIANTS: dict[str, tuple[str, ...]] = {
+    "v0-defaults": (
+        'agent.p_after_fusion="fused"',
+        'agent.sends="both"',
+        "agent.give_up_factor=0.0",
+        "agent.encounter_memory=4",
+        "agent.odometry_k_m=1.37e-4",
+        "world.odometry.substeps=1",
+    ),
+}
+
+
+def variant_overrides(name: str | None) -> list[str]:
+    """The overrides of a named variant (:data:`VARIANTS`); None: none."""
+    if name is None:
+        return []
+    if name not in VARIANTS:
+        raise ConfigError(f"variant '{name}': no such variant (known: {', '.join(sorted(VARIANTS))})")
+    return list(VARIANTS[name])
+
 
 @dataclass(frozen=True)
 class Scenario:

@@ -1,9 +1,12 @@
-"""Issue 18's readings of seeds 000 and 001, every one away from today's default, as scenario
-overrides: the settings ``AgentConfig.p_after_fusion``, ``sends``, ``give_up_factor``,
-``encounter_memory`` and ``OdometryConfig.substeps`` document them. The equality tests (batch
-against brains of one, packed tick against ``ForagingBrain.step``, processes against the batch
-engine) run with these too."""
+"""The e-puck settings away from today's defaults, as scenario overrides, so that the equality
+tests (batch against brains of one, packed tick against ``ForagingBrain.step``, processes against
+the batch engine) cover both sides of every issue 18 setting: today's defaults are the readings
+of seeds 000 and 001 (``AgentConfig.p_after_fusion``, ``sends``, ``give_up_factor``,
+``encounter_memory``, ``OdometryConfig.substeps``); ``READINGS`` is the named variant
+``v0-defaults`` (the defaults before issue 18), with a give-up factor kept on (1.5, not 0) so that
+the give-up rule also runs away from its default factor."""
 
-AGENT_READINGS = ('agent.p_after_fusion="distance"', 'agent.sends="last-visited"', "agent.give_up_factor=1.5",
-                  "agent.encounter_memory=16")
-READINGS = (*AGENT_READINGS, "world.odometry.substeps=10")
+from swarmloc.deploy.scenario import VARIANTS
+
+READINGS = tuple(o for o in VARIANTS["v0-defaults"] if not o.startswith("agent.give_up_factor=")) + (
+    "agent.give_up_factor=1.5",)

@@ -159,7 +159,9 @@ def test_merged_uniform_draws_are_numpys_uniform():
 
 
 def _fusing_brain(strategy: str, beta: float, p_after_fusion: str) -> ForagingBrain:
-    config = AgentConfig(strategy=strategy, beta=beta, p_after_fusion=p_after_fusion)
+    # give_up_factor 0: a robot built by hand with a goal 1 m away and 3 m travelled would give
+    # up on it at once under the default rule (factor 2), and fuse nothing.
+    config = AgentConfig(strategy=strategy, beta=beta, p_after_fusion=p_after_fusion, give_up_factor=0.0)
     return ForagingBrain(config, EpuckBody(), [0], [agent_rng(1, 0)], 0.1)
 
 
@@ -221,7 +223,7 @@ def test_several_fusions_in_one_tick_match_the_filter_functions(strategy, p_afte
 def test_the_goals_sent_are_the_reference_ones(sends):
     # Five robots, one per case: heading for the nest or the prey knowing both, heading for the
     # prey knowing only it (recruited), wandering knowing the nest, wandering knowing nothing.
-    config = AgentConfig(strategy="SSGIKF", sends=sends)
+    config = AgentConfig(strategy="SSGIKF", sends=sends, give_up_factor=0.0)  # as _fusing_brain
     brain = ForagingBrain(config, EpuckBody(), np.arange(5), [agent_rng(1, i) for i in range(5)], 0.1)
     brain.known[:] = [[True, True], [True, True], [False, True], [True, False], [False, False]]
     brain.target[:] = [0, 1, 1, -1, -1]

@@ -179,9 +179,10 @@ def _optional_float(text: str):
 
 
 def test_rows_equal_direct_batch_runs(tmp_path):
-    # 200 s rather than 20 s: by then robots have found areas, made round trips and got lost, so
-    # the comparison covers non-zero metrics and both a reached and a missing recruitment time.
-    spec = load_spec(write_spec(tmp_path, TINY.format(duration=200.0)))
+    # 400 s rather than 20 s: by then robots have found areas, made round trips and got lost, so
+    # the comparison covers non-zero metrics and both a reached and a missing recruitment time
+    # (with issue 18's defaults SSGIKF seed 1 recruits every robot in 221 s, NC none by 400 s).
+    spec = load_spec(write_spec(tmp_path, TINY.format(duration=400.0)))
     out = tmp_path / "results.csv"
     assert run_experiment(spec, out, workers=2, progress=False) == 4
     with open(out, newline="") as handle:
@@ -193,7 +194,7 @@ def test_rows_equal_direct_batch_runs(tmp_path):
         seed = int(row["seed"])
         assert int(row["replication"]) == seed - 1
         assert row["agent.strategy"] == row["strategy"]
-        direct = run_batch(load_scenario("ES1", ["world.duration_s=200.0",
+        direct = run_batch(load_scenario("ES1", ["world.duration_s=400.0",
                                                  f'agent.strategy="{row["strategy"]}"',
                                                  f"world.seed={seed}"]))
         m = direct.metrics
@@ -203,7 +204,7 @@ def test_rows_equal_direct_batch_runs(tmp_path):
         assert _optional_float(row["on_path_fraction_mean"]) == m["on_path_fraction_mean"]
         assert int(row["lost_total"]) == int(direct.lost_count.sum())
         assert (row["experiment"], row["group"], row["scenario"], row["robots"],
-                float(row["duration_s"])) == ("tiny", "g", "ES1", "10", 200.0)
+                float(row["duration_s"])) == ("tiny", "g", "ES1", "10", 400.0)
     # The comparison above is not vacuous.
     assert any(r["recruitment_time_s"] for r in rows) and not all(r["recruitment_time_s"] for r in rows)
     assert sum(int(r["round_trips_total"]) for r in rows) > 0

@@ -227,6 +227,28 @@ def test_values_a_group_fixes_tell_no_odometry_error_from_local_imitation(tmp_pa
             "SSIKF"} <= labels
 
 
+def test_a_value_is_the_default_when_the_shipped_scenario_has_it_not_when_it_is_most_common(tmp_path):
+    # Issue 18's ablation layout: every group fixes the reading, and most groups fix the old value
+    # ("both"); the default variant is still the one a run without the setting makes today
+    # (AgentConfig.sends = "last-visited"), and an unshipped scenario falls back to the mode.
+    def group(name, scenario, round_trips):
+        return _rows("abl", name, scenario, "SSGIKF", None, 10, 1800.0, round_trips, [300.0] * 3, [0.5] * 3)
+
+    rows = load_results(_write(tmp_path / "r.csv", (
+        group("v0", "ES1", [10, 11, 12]) + group("v0-bis", "ES1", [13, 14, 15])
+        + group("text", "ES1", [40, 41, 42]) + group("v0", "ES9", [1, 2, 3])
+        + group("text", "ES9", [4, 5, 6]) + group("v0-bis", "ES9", [7, 8, 9]))))
+    fixed = {("abl", "v0"): {"agent.sends": "both"}, ("abl", "v0-bis"): {"agent.sends": "both"},
+             ("abl", "text"): {"agent.sends": "last-visited"}}
+    table = claims._Table(rows, fixed)
+    labels = {(r["scenario"], r["group"]): table.variant(r).label() for r in table.rows}
+    assert labels[("ES1", "text")] == "SSGIKF"
+    assert labels[("ES1", "v0")].startswith("SSGIKF sends=both")
+    assert labels[("ES9", "text")] == "SSGIKF sends=last-visited"  # ES9 is not shipped: the mode
+    assert labels[("ES9", "v0")].startswith("SSGIKF")
+    assert "sends" not in labels[("ES9", "v0")]
+
+
 def test_a_numeric_grid_column_with_three_values_gets_a_line_figure(tmp_path):
     # The ES2 slip sweep's shape: NC and SSGIKF at slips 0.2, 0.1, 0.05; medians by hand.
     rows = []

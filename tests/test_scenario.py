@@ -11,7 +11,13 @@ import pytest
 from swarmloc.config import ConfigError, apply_overrides, from_dict, parse_value
 from swarmloc.deploy.cli import main
 from swarmloc.deploy.lab.epuck.batch import run_batch
-from swarmloc.deploy.scenario import Scenario, builtin_names, load_scenario
+from swarmloc.deploy.scenario import (
+    VARIANTS,
+    Scenario,
+    builtin_names,
+    load_scenario,
+    variant_overrides,
+)
 from swarmloc.world.epuck.foraging import WorldConfig
 
 SO_NAMES = ["SO-3.0x3.0", "SO-3.5x3.5", "SO-4.0x4.0", "SO-4.5x4.5"]
@@ -210,6 +216,57 @@ def test_overrides_reach_the_loaded_scenario():
     assert s.agent.beta == 0.001
     assert s.world.seed == 42
     assert s.world.arena.width_m == 3.0  # the rest is ES2's
+
+
+# The e-puck defaults before issue 18, written out from the code they were (git show
+# 950bdf5-era AgentConfig / OdometryConfig), and the readings of the seeds that replaced them.
+V0_VALUES = {"p_after_fusion": "fused", "sends": "both", "give_up_factor": 0.0, "encounter_memory": 4,
+             "odometry_k_m": 1.37e-4, "substeps": 1}
+READING_VALUES = {"p_after_fusion": "distance", "sends": "last-visited", "give_up_factor": 2.0,
+                  "encounter_memory": 16, "odometry_k_m": 1.37e-5, "substeps": 10}
+
+
+def _issue_18_values(s: Scenario) -> dict:
+    return {"p_after_fusion": s.agent.p_after_fusion, "sends": s.agent.sends,
+            "give_up_factor": s.agent.give_up_factor, "encounter_memory": s.agent.encounter_memory,
+            "odometry_k_m": s.agent.odometry_k_m, "substeps": s.world.odometry.substeps}
+
+
+@pytest.mark.parametrize("name", ["ES1", "ES3", "SO-4.0x4.0"])
+def test_defaults_are_the_seeds_readings_and_v0_defaults_the_old_ones(name):
+    assert _issue_18_values(load_scenario(name)) == READING_VALUES
+    assert _issue_18_values(load_scenario(name, variant_overrides("v0-defaults"))) == V0_VALUES
+
+
+def test_cli_variant_is_applied_before_set_and_an_unknown_one_is_refused(capsys, no_run):
+    from swarmloc.deploy import cli
+
+    args = cli.build_parser().parse_args(["batch", "ES1", "--variant", "v0-defaults", "--set", "world.odometry.substeps=3"])
+    s = cli.load_from_args(args)
+    assert (s.agent.sends, s.agent.encounter_memory, s.world.odometry.substeps) == ("both", 4, 3)
+    code = main(["batch", "ES1", "--variant", "v1-nosuch"])
+    err = capsys.readouterr().err
+    assert code == 2 and "v1-nosuch" in err and "v0-defaults" in err
+
+
+def test_spec_groups_named_after_a_variant_set_its_values():
+    """An experiment group named like a variant (e.g. ``v0-defaults``) spells the variant's values
+    in its ``set`` table: the spec means the same whatever today's defaults are."""
+    from swarmloc.deploy.lab.experiment import load_spec, shipped_specs
+
+    checked = 0
+    for name in shipped_specs():
+        spec = load_spec(name)
+        for group in spec.groups:
+            variant = next((v for v in VARIANTS if group.name == v or group.name.startswith(f"{v}-")), None)
+            if variant is None:
+                continue
+            fixed = dict(group.set)
+            for item in VARIANTS[variant]:
+                key, _, text = item.partition("=")
+                assert fixed.get(key) == parse_value(text), f"{name}/{group.name}: {key}"
+            checked += 1
+    assert checked >= 1
 
 
 # ---------------------------------------------------------------------------------------------

@@ -104,8 +104,9 @@ class AgentConfig:
     search_overshoot_m: float = 0.10
     #: The odometry error constants k_r = k_l of seed 000 eq. 10 (m: variance per metre of wheel
     #: travel), known to SIKF robots ("covariance knowledge", seed 001 §5). Default: what the
-    #: world's +-20 % uniform slip per tick gives at cruise speed, s^2 |dU| / 3.
-    odometry_k_m: float = 1.37e-4
+    #: world's +-20 % uniform slip per physics sub-step gives at cruise speed, s^2 |dU| / (3 S)
+    #: with S = 10 sub-steps per tick (``OdometryConfig.substeps``); 1.37e-4 with S = 1 (v0).
+    odometry_k_m: float = 1.37e-5
     #: How many neighbours' bearings a robot repeats in its messages (needed for eq. 27).
     heard_capacity: int = 3
     #: Two robots exchange once per encounter (seed 000 §4.1, §5): after an exchange the partner
@@ -114,20 +115,26 @@ class AgentConfig:
     encounter_gap_s: float = 2.0
     #: How many recent partners a robot remembers. When all slots hold partners still within the
     #: gap, the one expiring first is evicted, and if it is still in range the pair can fuse again
-    #: within one encounter (issue 18, reading 6). 16 slots (the most) make that practically never
-    #: happen at the seeds' densities; 4 is today's default.
-    encounter_memory: int = 4
+    #: within one encounter (issue 18, reading 6). Default 16 slots (the most), so that the seeds'
+    #: "When two robots encounter they exchange their estimates" (seed 000 §4.1) happens once per
+    #: encounter, as the papers describe it: at the seeds' densities no partner still in range is
+    #: then evicted. 4 was the default before issue 18 (``v0-defaults``).
+    encounter_memory: int = 16
 
     # -- Readings of the seeds' text where it contradicts itself or is silent (issue 18). The
-    # defaults are the behaviour the published reproductions (docs/social-odometry-000/) were made
-    # with; deploy/experiments/so-000-readings.toml ablates them.
+    # defaults are the readings the seeds' text supports, chosen on the ablation
+    # docs/so-000-readings/ (deploy/experiments/so-000-readings.toml). The defaults before issue 18
+    # (p "fused", sends "both", give_up_factor 0, encounter_memory 4, world.odometry.substeps 1,
+    # odometry_k_m 1.37e-4) remain selectable as the named variant ``v0-defaults``
+    # (``swarmloc.deploy.scenario.VARIANTS``; ``--variant v0-defaults``), with which
+    # docs/social-odometry-000/ and -001/ were made before issue 18.
 
     #: What ``p`` is after a fusion (issue 18, reading 1). Seed 000 contradicts itself here:
     #:
-    #: - ``"fused"`` (default): table 1 and eq. 13, "p_{k|k-1} = p_{k-1|k-1} + Delta d_k": the
-    #:   fused ``p`` of eq. 22 (SGIKF) / eq. 26 (SGIFF) is kept and grows with the distance
+    #: - ``"fused"`` (``v0-defaults``): table 1 and eq. 13, "p_{k|k-1} = p_{k-1|k-1} + Delta d_k":
+    #:   the fused ``p`` of eq. 22 (SGIKF) / eq. 26 (SGIFF) is kept and grows with the distance
     #:   travelled, so every fusion leaves a robot more confident;
-    #: - ``"distance"``: eq. 23, "we define the inverse of the a priori confidence level
+    #: - ``"distance"`` (default): eq. 23, "we define the inverse of the a priori confidence level
     #:   (p_{k|k-1}^i) of robot i as the distance travelled (d_k^i) since the robot left a
     #:   specific area. [...] p_{k|k-1}^i = d_k^i" (and §4.2.2 for the SGIFF: "also calculated as
     #:   the distance travelled since the robot left a specific area"); seed 001 §4.2: "the
@@ -137,29 +144,45 @@ class AgentConfig:
     #:
     #: The SIKF strategies (``confidence = "covariance"``) ignore it: their prior, eq. 19, is
     #: propagated from the a posteriori covariance by definition.
-    p_after_fusion: str = "fused"
+    #:
+    #: Default ``"distance"``: eq. 23 is the SGIKF's own definition of its prior, stated twice in
+    #: seed 000 and again in seed 001; table 1's generic eq. 13 is the SIKF's. With "fused",
+    #: every encounter leaves both robots more confident than either was, and a pair of wrong
+    #: estimates then outweighs a right one (ablation, group p-distance).
+    p_after_fusion: str = "distance"
     #: Which goal estimates a robot sends (issue 18, reading 2):
     #:
-    #: - ``"both"`` (default): every goal it knows (seed 000 §4.1: "When two robots encounter they
+    #: - ``"both"`` (``v0-defaults``): every goal it knows (seed 000 §4.1: "When two robots encounter they
     #:   exchange their estimates about the goal areas");
-    #: - ``"last-visited"``: seed 001 §4.2, "While moving from one area to the other, if a robot
+    #: - ``"last-visited"`` (default): seed 001 §4.2, "While moving from one area to the other, if a robot
     #:   encounters another robot, it transmits its estimated location of the last visited
     #:   area"; seed 000 §6.1.2 explains single beating double by the same: "they have better
     #:   information on the goal they are coming from than the one they are aiming at". A robot
     #:   with a target sends only the other goal (the area it comes from), if it knows it; a
     #:   wandering robot (no target: it knows at most the one area it found) sends what it knows,
     #:   so that recruitment (seed 000 §6.1.1) still works.
-    sends: str = "both"
+    #:
+    #: Default ``"last-visited"``: seed 001 says it in so many words, and seed 000 §6.1.2's
+    #: explanation of its own result ("robot i improves its goal estimate with the more reliable
+    #: information of robot j (the estimate on where it is coming from)") holds only if robot j
+    #: sends that estimate; seed 000 §4.1's "exchange their estimates" does not say which.
+    sends: str = "last-visited"
     #: Giving up on an estimate that cannot be reached (issue 18, reading 5). Seed 000 §5: "If
     #: the robot arrives at a place where the area was supposed to be but is not, it resets its
-    #: Goal Locations memory"; an estimate beyond a wall is never arrived at. 0 (default): the
-    #: robot declares itself lost only within ``arrival_tolerance_m`` of the estimate plus the
+    #: Goal Locations memory"; an estimate beyond a wall is never arrived at. 0 (``v0-defaults``):
+    #: the robot declares itself lost only within ``arrival_tolerance_m`` of the estimate plus the
     #: overshoot, and meanwhile counts as on the path. ``f > 0``: on setting out for a target (on
     #: leaving an area, or recruited to one) the robot allows itself ``f`` times the straight-line
     #: distance to the estimate; having travelled that (odometric distance, eq. 23's measure)
     #: without reaching the estimate it declares itself lost, as if it had arrived where the area
     #: should be and not found it. The papers give no such rule: the factor is ours.
-    give_up_factor: float = 0.0
+    #:
+    #: Default 2: a robot pressed against a wall by an estimate behind it never "arrives at a
+    #: place where the area was supposed to be", so without a limit seed 000 §5's reset never
+    #: happens to it, and it is counted on the path for the rest of the run (seed 000 §6.1.3
+    #: counts it lost: "when robots get lost they are typically around the nest or prey area").
+    #: Twice the straight-line distance leaves room for avoiding others on the way.
+    give_up_factor: float = 2.0
 
     def __post_init__(self):
         try:

@@ -108,12 +108,19 @@ class OdometryConfig:
     slip_fraction: float = 0.2
     #: Physics sub-steps per controller tick, the slip drawn per sub-step (issue 18, reading 3).
     #: Seed 001 §4.1 draws the slip "at each time step" of a simulator "based on ODE", whose step
-    #: it does not give; seed 000 §5 gives only the controller's 10 Hz clock. 1 (default): the
-    #: world moves once per 100 ms tick. ``S`` > 1: it moves ``S`` times, ``1/S`` of the
+    #: it does not give; seed 000 §5 gives only the controller's 10 Hz clock. 1 (``v0-defaults``):
+    #: the world moves once per 100 ms tick. ``S`` > 1: it moves ``S`` times, ``1/S`` of the
     #: commanded travel each, so the heading drift per metre shrinks about as ``1/sqrt(S)``
     #: (+-20 % per 10 ms sub-step, ``S`` = 10, drifts like +-6.3 % per tick). The encoders and
     #: the collisions stay per tick.
-    substeps: int = 1
+    #:
+    #: Default 10 (100 Hz physics under the 10 Hz controller): seed 001's "time step" is the ODE
+    #: simulator's, and a rigid-body simulator steps faster than the controller it hosts (ODE
+    #: robot simulators of the time commonly at 100 Hz; the papers name no rate, so 10 is ours).
+    #: With 1, a lone robot's lateral miss over ES3's 5.95 m is several area radii and the
+    #: SGIKFs' chains of corrections cannot keep up (ablation docs/so-000-readings/, group
+    #: substeps-10; seed 000 §6.2 quotes about 150 SGIKF round trips in simulated ES1).
+    substeps: int = 10
 
     def __post_init__(self):
         if not 0.0 <= self.slip_fraction < 1.0:

@@ -207,6 +207,37 @@ class Variant:
                 -1.0 if self.beta is None else self.beta)
 
 
+_NO_VALUE = object()
+
+
+def _shipped_value(column: str, scenario) -> object:
+    """The value of the dotted key ``column`` in the shipped scenario ``scenario`` as it loads
+    today (its file, else the code's default); ``_NO_VALUE`` if there is no such scenario or key.
+    Issue 18's ablation sets every reading in every group, so "the default" of a column is what
+    a run without that setting does now, not the most common value among the groups."""
+    from swarmloc.deploy.scenario import builtin_names, load_scenario
+
+    if not isinstance(scenario, str) or scenario not in builtin_names():
+        return _NO_VALUE
+    node = load_scenario(scenario).to_dict()
+    for part in column.split("."):
+        if not isinstance(node, dict) or part not in node:
+            return _NO_VALUE
+        node = node[part]
+    return node
+
+
+def _same_value(a, b) -> bool:
+    """Equal as settings: lists and tuples alike, ints and floats alike."""
+    def norm(v):
+        if isinstance(v, (list, tuple)):
+            return [norm(x) for x in v]
+        if isinstance(v, (int, float)) and not isinstance(v, bool):
+            return float(v)
+        return v
+    return norm(a) == norm(b)
+
+
 class _Table:
     """The rows with what the figures and claims need: each row's variant, which rows belong to a
     sweep over the number of robots, and the best β of each Fermi variant."""
@@ -226,6 +257,7 @@ class _Table:
                         row[key] = value
             self.rows.append(row)
         self._extra_columns = self._find_extra_columns()
+        self._shipped_values: dict[tuple, object] = {}
         self._labelled_groups: set[tuple] = set()
         self._variants = {id(row): self._variant(row) for row in self.rows}
         # A (experiment, group, scenario) whose rows have several robot counts is a robots sweep
@@ -277,14 +309,29 @@ class _Table:
         cached = self._variants.get(id(row))
         return cached if cached is not None else self._variant(row)
 
+    def _shipped(self, column: str, scenario) -> object:
+        key = (column, scenario)
+        if key not in self._shipped_values:
+            self._shipped_values[key] = _shipped_value(column, scenario)
+        return self._shipped_values[key]
+
     def _variant(self, row: dict) -> Variant:
         strategy = row.get("strategy") or "?"
         extras = []
         for column, default in self._extra_columns.items():
             value = row.get(column)
-            if value is None or (default is not None and repr(value) == default):
+            if value is None:
                 continue
-            extras.append((column, value))
+            # A value is the default if the row's shipped scenario has it today (file or code
+            # default); for a scenario the report cannot load, the most common value is.
+            shipped = self._shipped(column, row.get("scenario"))
+            if shipped is not _NO_VALUE:
+                if _same_value(value, shipped):
+                    continue
+            elif default is not None and repr(value) == default:
+                continue
+            # A list value (a position) as a tuple: a variant is a dictionary key.
+            extras.append((column, tuple(value) if isinstance(value, list) else value))
         if self._group_key(row) in self._labelled_groups:
             extras.append((_GROUP_EXTRA, str(row.get("group"))))
         beta = row.get("beta") if _is_fermi(strategy) else None

@@ -397,7 +397,7 @@ def swept_parameters(table: _Table, rows: Sequence[dict]) -> list[str]:
     ``rows``: each gets a line figure (e.g. ``world.odometry.slip_fraction``)."""
     out = []
     for column in table._extra_columns:
-        values = {r.get(column) for r in rows}
+        values = {repr(v) if isinstance(v, list) else v for v in (r.get(column) for r in rows)}
         if len(values) >= 3 and all(isinstance(v, (int, float)) and not isinstance(v, bool)
                                     for v in values):
             out.append(column)
