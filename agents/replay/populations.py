@@ -286,7 +286,9 @@ class ParticleFilterLocalizer:
         #: many particles were replaced so far.
         self.fit = 1.0 if setup.initial_area_m is None else 0.0
         self.resets = 0
-        self._buffer = ReadingBuffer(self.params.fix_window_s)
+        #: The readings of the last ``fix_window_s`` (only with ``fix_proposal``, its one user:
+        #: carrying them through every tick's motion is a Python loop on the hot path).
+        self._buffer = ReadingBuffer(self.params.fix_window_s) if self.params.fix_proposal else None
         self._rng = rng  # the core's generator too: one stream per robot
 
     def _mix_fix(self, core) -> None:
@@ -304,7 +306,7 @@ class ParticleFilterLocalizer:
 
     def _fix_poses(self, n: int, generator: np.random.Generator) -> np.ndarray | None:
         """Poses from the buffered readings' fix (None: no fix, or not asked)."""
-        if not (self.params.sensor_resetting and self.params.fix_proposal):
+        if self._buffer is None or not self.params.sensor_resetting:
             return None
         return self._buffer.fix_poses(n, generator)
 
@@ -332,7 +334,8 @@ class ParticleFilterLocalizer:
         core = self._core(dt)
         distance, turn = obs.odometry_v_mps * dt, obs.odometry_omega_rad_s * dt
         core.predict(distance, turn)
-        self._buffer.move(distance, turn, dt)
+        if self._buffer is not None:
+            self._buffer.move(distance, turn, dt)
         self._pose = unicycle(self._pose[None, :], distance, turn)[0]
         std_d, std_t = setup.motion.tick_std(obs.odometry_v_mps, obs.odometry_omega_rad_s, dt)
         self._cov = self._cov + _motion_growth(std_d, std_t)
@@ -344,7 +347,8 @@ class ParticleFilterLocalizer:
                 lm_xy, rng_m = xy[known], obs.landmark_range_m[known]
                 bearing = obs.landmark_bearing_rad[known]
                 self._last_readings = (lm_xy, rng_m, bearing)
-                self._buffer.add(obs.landmark_ids[known], lm_xy, rng_m, bearing, camera)
+                if self._buffer is not None:
+                    self._buffer.add(obs.landmark_ids[known], lm_xy, rng_m, bearing, camera)
                 # One correction per reading: the recovery averages (w_slow, w_fast) then
                 # compare likelihoods of one reading each, not of frames with 1 or 4 readings.
                 resetting = self.amcl_params.recovery and self.params.sensor_resetting
@@ -363,8 +367,8 @@ class ParticleFilterLocalizer:
                 if resetting and self.fit < self.params.reset_threshold:
                     n_reset = int(core.n_particles * (1.0 - self.fit / self.params.reset_threshold))
                     self.resets += core.replace_random(n_reset, lambda n, g: (
-                        self._fix_poses(n, g) if self._buffer.distinct_landmarks() >= 2
-                        and self.params.fix_proposal else sensor_resetting_poses(
+                        self._fix_poses(n, g) if self._buffer is not None
+                        and self._buffer.distinct_landmarks() >= 2 else sensor_resetting_poses(
                             n, g, lm_xy, rng_m, bearing, camera, setup.bounds_m)))
             for reading in readings:
                 core.reweight(_mixture(
