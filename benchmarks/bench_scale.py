@@ -10,7 +10,9 @@ memory, mean and max, from ``/proc/PID/smaps_rollup``, sampled ``--settle-s`` af
 prints the table: ticks/s, p50/p99 tick (ms, as the world-server measured them), overruns after
 the run's first second, the memory of the whole run's process tree (PSS), the CPU the agents
 (all together) and the world-server used, in cores, over a window mid-run, and where the
-world-server's ticks went (computing and putting the Senses, waiting for the Acts, stepping). After the sizes
+world-server's ticks went (computing and putting the Senses, waiting for the Acts, stepping), and
+for a run with late overruns the first of them, phase by phase. The memory is read paced
+(:data:`MEMORY_PACE_S`), after the CPU window, so as not to disturb the run. After the sizes
 given it goes on by ``--step`` agents while 10 Hz holds (10.0 ticks/s, p99 under the 100 ms
 period, no overrun after the first second), up to ``--max``, and prints the largest swarm that
 held. With ``--floor`` each size also runs the plain-Zenoh floor in real time, right after
@@ -39,6 +41,10 @@ import threading
 import time
 from pathlib import Path
 
+#: Reading a process's PSS walks its page tables: about 2.3 ms of kernel time per agent here, so
+#: reading 300 agents at once took 2 s of CPU mid-run and caused the overruns it then reported
+#: (clustered 10-13 s into every 300-agent run). A real-time run reads one process per 20 ms.
+MEMORY_PACE_S = 0.02
 #: A run holds 10 Hz if it ticks at this rate or more, p99 under the period, no late overrun.
 HOLD_TICKS_PER_S = 9.95
 PERIOD_MS = 100.0
@@ -173,11 +179,20 @@ class Run:
             self._session.close()
             self._session = None
 
-    def memory(self) -> tuple[list[tuple[int, int]], int]:
-        """Each agent's (PSS, RSS) in KiB, and the PSS of the run's whole process tree."""
-        agents = [m for m in map(memory_kib, pieces(self.proc.pid)[0]) if m is not None]
-        tree = [m for m in map(memory_kib, [self.proc.pid, *descendants(self.proc.pid)]) if m is not None]
-        return agents, sum(pss for pss, _ in tree)
+    def memory(self, pace_s: float = 0.0) -> tuple[list[tuple[int, int]], int]:
+        """Each agent's (PSS, RSS) in KiB, and the PSS of the run's whole process tree; with
+        ``pace_s``, one process read per ``pace_s`` at most (:data:`MEMORY_PACE_S`)."""
+        agents = set(pieces(self.proc.pid)[0])
+        mine, tree = [], 0
+        for pid in [self.proc.pid, *descendants(self.proc.pid)]:
+            m = memory_kib(pid)
+            if m is not None:
+                tree += m[0]
+                if pid in agents:
+                    mine.append(m)
+            if pace_s:
+                time.sleep(pace_s)  # pacing, not a readiness wait
+        return mine, tree
 
     def stop(self) -> None:
         self.close_watch()
@@ -308,7 +323,7 @@ def swarmloc_row(n: int, scenario: str, duration_s: float, tmp: str) -> bool | N
         window_s = time.perf_counter() - t_before
         if run.proc.poll() is None:  # else the window was not inside the run: no figure
             cores = [(b - a) / window_s for a, b in zip(before, after)]
-        total = run.memory()[1]
+        total = run.memory(pace_s=MEMORY_PACE_S)[1]
     t = run.transport(timeout_s=duration_s * 3 + 120)
     if isinstance(t, str):
         print(f"{n:>6} {'swarmloc':>8} failed: {t}")
@@ -319,6 +334,11 @@ def swarmloc_row(n: int, scenario: str, duration_s: float, tmp: str) -> bool | N
           f"{mib(total) if total else '-':>9} {f'{joined:.1f}' if joined else '-':>8} "
           f"{'yes' if ok else 'no':>5} {'/'.join(f'{c:.2f}' for c in cores) if cores else '-':>18} "
           f"{phases(t):>31}  {load_before} -> {load()}", flush=True)
+    late = [o for o in t.get("overrun_ticks", []) if o["tick"] > 10]
+    if late:  # where the time of the late overruns went (world/server.py: TickStats.overrun_ticks)
+        print("         overruns (tick: sense/collect/step ms, next tick late by ms): " + ", ".join(
+            f"{o['tick']}: {o['sense_put']:.0f}/{o['collect']:.0f}/{o['step']:.0f} +{o['late_ms']:.0f}"
+            for o in late[:8]), flush=True)
     return ok
 
 

@@ -220,6 +220,11 @@ def test_realtime_mode_holds_ten_hertz(tmp_path):
     assert t["ticks"] == 50
     assert 9.0 <= t["ticks_per_s"] <= 10.5
     assert t["overruns"] <= 2
+    # Each overrun is kept with where its tick's time went (the first MAX_OVERRUNS_KEPT).
+    assert len(t["overrun_ticks"]) == t["overruns"]
+    for o in t["overrun_ticks"]:
+        assert 0 <= o["tick"] < 50 and o["late_ms"] >= 0, o
+        assert min(o["sense_put"], o["collect"], o["step"]) >= 0, o
 
 
 def test_swarmloc_run_command_end_to_end(tmp_path):

@@ -18,6 +18,7 @@ counted, logged once per sender, and changes nothing.
 
 from __future__ import annotations
 
+import gc
 import logging
 import threading
 import time
@@ -42,6 +43,8 @@ from swarmloc.world.service import ServedWorld
 
 log = logging.getLogger("swarmloc.world")
 
+#: Overruns whose details a run keeps (:attr:`TickStats.overrun_ticks`).
+MAX_OVERRUNS_KEPT = 20
 
 
 @dataclass
@@ -55,6 +58,9 @@ class TickStats:
     stale_acts: int = 0  # acts that arrived after their tick was closed
     overruns: int = 0
     overruns_after_1s: int = 0  # those of ticks after the run's first wall second (start-up)
+    #: the first overruns, where the time went: tick, the tick's phases (ms) and how late the
+    #: next tick started (ms), for diagnosis (results.json: transport.overrun_ticks)
+    overrun_ticks: list = field(default_factory=list)
     #: where each tick went: computing and putting the Senses, waiting for the Acts, stepping
     phases_s: dict = field(default_factory=lambda: {"sense_put": [], "collect": [], "step": []})
 
@@ -79,6 +85,7 @@ class TickStats:
             "stale_acts": self.stale_acts,
             "overruns": self.overruns,
             "overruns_after_1s": self.overruns_after_1s,
+            "overrun_ticks": self.overrun_ticks,
             **{f"{phase}_ms_p{q}": round(float(np.percentile(v, q)) * 1e3, 3) if v else None
                for phase, v in self.phases_s.items() for q in (50, 99)},
         }
@@ -266,6 +273,19 @@ class WorldServer:
 
     def run(self) -> dict:
         """Run the whole scenario; return the metrics and the run's figures."""
+        # Everything built so far (modules, numba's dispatchers, the world's arrays, the
+        # scenario) lives as long as the run: move it out of the collector's view. A full
+        # collection otherwise walked it all, 20-55 ms each, several times a run at 300
+        # robots, each one an overrun of the 100 ms real-time tick (benchmarks/bench_scale.py).
+        # Unfrozen when the run ends: a process may serve more runs (tests do).
+        gc.collect()
+        gc.freeze()
+        try:
+            return self._run()
+        finally:
+            gc.unfreeze()
+
+    def _run(self) -> dict:
         world = self.world
         n = world.n_robots
         self.stats.started_s = time.perf_counter()
@@ -331,6 +351,10 @@ class WorldServer:
                     self._stop.wait(pause)
                 else:
                     self.stats.overruns += 1
+                    if len(self.stats.overrun_ticks) < MAX_OVERRUNS_KEPT:
+                        self.stats.overrun_ticks.append({
+                            "tick": world.tick - 1, "late_ms": round(-pause * 1e3, 2),
+                            **{p: round(v[-1] * 1e3, 2) for p, v in phases.items()}})
                     if time.perf_counter() - self.stats.started_s > 1.0:
                         self.stats.overruns_after_1s += 1
         return self.finish("completed" if world.done else "stopped")
