@@ -33,6 +33,11 @@ pytest.importorskip("distributed")
 def _client(spec: Path, out: Path, address: str) -> subprocess.Popen:
     """``swarmloc experiment`` on the cluster, as its own process (progress lines on stderr)."""
     env = dict(os.environ, PYTHONUNBUFFERED="1")
+    # A test run started in the background of a non-interactive shell has SIGINT ignored, which a
+    # child inherits and Python then keeps: the interrupt tests' Ctrl-C was lost. A handler of
+    # ours is reset to the default at exec, so the child gets the default and KeyboardInterrupt.
+    if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
     return subprocess.Popen([sys.executable, "-m", "swarmloc.deploy.cli", "experiment", str(spec),
                              "--out", str(out), "--executor", "dask", "--scheduler", address],
                             stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
