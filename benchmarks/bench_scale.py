@@ -62,7 +62,7 @@ def descendants(root: int, parent: dict[int, int | None] | None = None) -> list[
     """Every live process under ``root`` (not itself), from /proc (or the ``parent`` map of one
     scan of it: scanning /proc is slow on a loaded machine with a thousand processes)."""
     if parent is None:
-        parent = {int(p): _ppid(int(p)) for p in os.listdir("/proc") if p.isdigit()}
+        parent = parents()
     children: dict[int, list[int]] = {}
     for p, pp in parent.items():
         children.setdefault(pp, []).append(p)
@@ -101,10 +101,16 @@ def cpu_s(pid: int) -> float:
         return 0.0
 
 
-def pieces(run_pid: int) -> tuple[list[int], int | None]:
+def parents() -> dict[int, int | None]:
+    """Every live process's parent, from one scan of /proc."""
+    return {int(p): _ppid(int(p)) for p in os.listdir("/proc") if p.isdigit()}
+
+
+def pieces(run_pid: int, parent: dict[int, int | None] | None = None) -> tuple[list[int], int | None]:
     """The agents of a ``swarmloc run`` (the children of its agent server, ``swarmloc agents``)
-    and its world-server, from one scan of /proc."""
-    parent = {int(p): _ppid(int(p)) for p in os.listdir("/proc") if p.isdigit()}
+    and its world-server, from one scan of /proc (or the ``parent`` map of one)."""
+    if parent is None:
+        parent = parents()
     children = [p for p, pp in parent.items() if pp == run_pid]
     servers = [p for p in children if "agents" in cmdline(p)[3:4]]
     world = next((p for p in children if "world" in cmdline(p)[3:4]), None)
@@ -182,9 +188,10 @@ class Run:
     def memory(self, pace_s: float = 0.0) -> tuple[list[tuple[int, int]], int]:
         """Each agent's (PSS, RSS) in KiB, and the PSS of the run's whole process tree; with
         ``pace_s``, one process read per ``pace_s`` at most (:data:`MEMORY_PACE_S`)."""
-        agents = set(pieces(self.proc.pid)[0])
+        parent = parents()
+        agents = set(pieces(self.proc.pid, parent)[0])
         mine, tree = [], 0
-        for pid in [self.proc.pid, *descendants(self.proc.pid)]:
+        for pid in [self.proc.pid, *descendants(self.proc.pid, parent)]:
             m = memory_kib(pid)
             if m is not None:
                 tree += m[0]

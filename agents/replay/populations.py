@@ -257,12 +257,8 @@ class ParticleFilterLocalizer:
         low, high = np.array([x0, y0, -math.pi]), np.array([x1, y1, math.pi])
 
         def sample_area(n: int, generator: np.random.Generator) -> np.ndarray:
-            fixed = self._fix_poses(n, generator)
-            if fixed is not None:
-                return fixed
             if self.params.sensor_resetting and self._last_readings is not None:
-                return sensor_resetting_poses(n, generator, *self._last_readings, setup.camera,
-                                              setup.bounds_m)
+                return self._reset_poses(n, generator, *self._last_readings)
             return generator.uniform(low, high, size=(n, 3))
 
         # Motion noise per second at the typical command; the per-tick std is this times
@@ -294,8 +290,7 @@ class ParticleFilterLocalizer:
     def _mix_fix(self, core) -> None:
         """Mixture MCL's fixed share of particles from the fix, when it disagrees with the
         estimate (see :class:`PfParams`)."""
-        probe = self._buffer.fix_poses(16, self._rng) if self._buffer.distinct_landmarks() >= 2 \
-            else None
+        probe = self._buffer.fix_poses(16, self._rng)
         if probe is None:
             return
         centre = np.median(probe[:, :2], axis=0)
@@ -304,11 +299,15 @@ class ParticleFilterLocalizer:
         n_mix = max(1, int(core.n_particles * self.params.fix_mixing))
         self.resets += core.replace_random(n_mix, lambda n, g: self._buffer.fix_poses(n, g))
 
-    def _fix_poses(self, n: int, generator: np.random.Generator) -> np.ndarray | None:
-        """Poses from the buffered readings' fix (None: no fix, or not asked)."""
-        if self._buffer is None or not self.params.sensor_resetting:
-            return None
-        return self._buffer.fix_poses(n, generator)
+    def _reset_poses(self, n: int, generator: np.random.Generator, landmarks_xy: np.ndarray,
+                     range_m: np.ndarray, bearing_rad: np.ndarray) -> np.ndarray:
+        """Sensor resetting's poses: from the buffered readings' fix when ``fix_proposal`` is on
+        and they hold two distinct landmarks, else from the circles of the readings given."""
+        fixed = None if self._buffer is None else self._buffer.fix_poses(n, generator)
+        if fixed is not None:
+            return fixed
+        return sensor_resetting_poses(n, generator, landmarks_xy, range_m, bearing_rad,
+                                      self.setup.camera, self.setup.bounds_m)
 
     def _core(self, dt_s: float):
         """The AMCL core; its per-step motion noise is fixed when it is built, so it is built
@@ -366,10 +365,8 @@ class ParticleFilterLocalizer:
                     self._mix_fix(core)
                 if resetting and self.fit < self.params.reset_threshold:
                     n_reset = int(core.n_particles * (1.0 - self.fit / self.params.reset_threshold))
-                    self.resets += core.replace_random(n_reset, lambda n, g: (
-                        self._fix_poses(n, g) if self._buffer is not None
-                        and self._buffer.distinct_landmarks() >= 2 else sensor_resetting_poses(
-                            n, g, lm_xy, rng_m, bearing, camera, setup.bounds_m)))
+                    self.resets += core.replace_random(n_reset, lambda n, g: self._reset_poses(
+                        n, g, lm_xy, rng_m, bearing))
             for reading in readings:
                 core.reweight(_mixture(
                     teammate_log_density(core.particles, reading, self._pose, self._cov, camera),
