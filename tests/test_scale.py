@@ -141,6 +141,74 @@ def test_robot_id_lists():
             parse_robot_ids(bad)
 
 
+_ORPHAN = """
+import os, signal, sys, time
+from swarmloc.deploy.fork.server import die_with_parent
+out, late = sys.argv[1], sys.argv[2] == "late"
+parent = os.getpid()
+if os.fork():
+    if late:
+        os._exit(0)          # the parent dies before its child asks for a signal
+    time.sleep(60)           # killed by the test once the child has asked
+    os._exit(0)
+with open(out + ".pid", "w") as f:
+    f.write(str(os.getpid()))
+def on_term(signum, frame):
+    with open(out + ".term", "w") as f:
+        f.write("SIGTERM")
+    os._exit(0)
+signal.signal(signal.SIGTERM, on_term)
+while late and os.getppid() == parent:
+    time.sleep(0.01)
+if late:  # the forked agent's own first step: it must give up, not start an agent
+    from swarmloc.deploy.fork.server import _child
+    answer = f"_child returned {_child(None, 7, None, parent)}"
+else:
+    answer = str(die_with_parent(signal.SIGTERM, parent_pid=parent))
+with open(out + ".tmp", "w") as f:
+    f.write(answer)
+os.rename(out + ".tmp", out)
+time.sleep(60)
+"""
+
+
+def _wait_file(path: Path, timeout_s: float = 30) -> str:
+    deadline = time.monotonic() + timeout_s
+    while not path.exists():
+        assert time.monotonic() < deadline, f"{path} never appeared"
+        time.sleep(0.01)
+    return path.read_text()
+
+
+@pytest.mark.parametrize("late", [False, True])
+def test_a_forked_agent_whose_server_died_first_does_not_start(tmp_path, late):
+    """An agent forked by the server asks for SIGTERM on its server's death (early: the kernel
+    sends it). If the server died first (late: the race CI once lost, the server killed right
+    after its last fork), no signal will ever come: the agent must end instead of outliving it."""
+    out = tmp_path / "answer"
+    parent = subprocess.Popen([sys.executable, "-c", _ORPHAN, str(out), "late" if late else "early"])
+    child = None
+    try:
+        answer = _wait_file(out)
+        child = int((tmp_path / "answer.pid").read_text())
+        if late:
+            assert answer == "_child returned 1", answer
+        else:
+            assert answer == "True"
+            parent.kill()
+            parent.wait(timeout=10)
+            assert _wait_file(tmp_path / "answer.term") == "SIGTERM", "the kernel signals the death"
+    finally:
+        for pid in ([child] if child else []):
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+        parent.kill()
+        parent.wait(timeout=10)
+    assert not _wait_gone([child], 10)
+
+
 def _tcp_sockets_to(port: int) -> dict[int, str]:
     """inode -> local address of every IPv4 TCP connection to 127.0.0.1:``port``."""
     found = {}

@@ -74,10 +74,16 @@ def parse_robot_ids(text: str) -> list[int]:
     return ids
 
 
-def die_with_parent(sig: int = signal.SIGTERM) -> bool:
+def die_with_parent(sig: int = signal.SIGTERM, parent_pid: int | None = None) -> bool:
     """Ask Linux to send ``sig`` to this process when its parent dies; False if the parent is
-    already gone (we were orphaned before asking) or the call is unavailable."""
-    parent = os.getppid()
+    already gone (we were orphaned before asking) or the call is unavailable.
+
+    ``parent_pid``: the parent's pid as known before this process existed (a forked child is
+    given its server's). Without it the parent is whoever ``getppid`` names now, which is already
+    the reaper (1, or a subreaper) if the parent died between our start and this call: the
+    kernel then has no death left to signal, so the caller must act on False itself.
+    """
+    parent = os.getppid() if parent_pid is None else parent_pid
     try:
         libc = ctypes.CDLL(None, use_errno=True)
         if libc.prctl(_PR_SET_PDEATHSIG, int(sig), 0, 0, 0) != 0:
@@ -96,16 +102,21 @@ def _preload() -> None:
     exercise_agents(ticks=4)
 
 
-def _child(args, robot: int, log_dir: Path | None) -> int:
+def _child(args, robot: int, log_dir: Path | None, server_pid: int) -> int:
     """The forked agent: its log, its signals, then ``swarmloc agent``'s own code."""
     from swarmloc.deploy.cli import _install_stop, serve_agent
 
-    die_with_parent(signal.SIGTERM)
     if log_dir is not None:
         fd = os.open(log_dir / f"agent-{robot}.log", os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
         os.dup2(fd, 1)
         os.dup2(fd, 2)
         os.close(fd)
+    if not die_with_parent(signal.SIGTERM, parent_pid=server_pid):
+        # The server died between our fork and this call (a launcher that kills it as soon as
+        # the last agent is announced can do that): no SIGTERM will ever come, so end now.
+        print(f"swarmloc agent {robot}: the agent server (pid {server_pid}) is gone; not starting",
+              file=sys.stderr)
+        return 1
     stop = _install_stop()
     agent_args = argparse.Namespace(**{**vars(args), "robot": robot})
     return serve_agent(agent_args, stop)
@@ -161,6 +172,7 @@ def serve(args) -> int:
     say = (lambda line: print(json.dumps(line), flush=True)) if args.announce else (lambda line: None)
     server_args = argparse.Namespace(**{k: v for k, v in vars(args).items() if k != "func"})
     forking.set()
+    server_pid = os.getpid()
     for robot in robots:
         if stopping.is_set():
             break
@@ -171,7 +183,7 @@ def serve(args) -> int:
             children.clear()  # a SIGTERM before the child's own handler must not reach siblings
             code = 1
             try:
-                code = _child(server_args, robot, log_dir)
+                code = _child(server_args, robot, log_dir, server_pid)
             except BaseException as exc:  # noqa: BLE001 -- a child must never return into the loop
                 print(f"swarmloc agent {robot}: {exc!r}", file=sys.stderr)
             finally:
