@@ -178,3 +178,49 @@ def test_report_bound_table_lists_each_robot_and_the_share_within_60_s():
                 if line.startswith("| first reading (hard bound), cooperative"))
     assert alone.split("|")[2:6] == [" 1.0 ", " 2.0 ", " - ", " 67% "]
     assert coop.split("|")[2:6] == [" 1.0 ", " 2.0 ", " 6.0 ", " 100% "]
+
+
+# -- the odometry's share of the tracking error (deploy/lab/replay/motion_bound.py) --------------
+
+
+def _circling(v_mps=0.1, omega_rad_s=0.2, gap=None):
+    """A robot on a circle at a known speed and turn rate (Vicon at 100 Hz, optionally with a gap
+    ``(t0, t1)``), whose commands were 0.9x its speed and 0.8x its turn rate, every 0.1 s."""
+    t = np.arange(0.0, 30.0, 0.01)
+    th = omega_rad_s * t
+    r = v_mps / omega_rad_s
+    pose = np.column_stack([r * np.sin(th), r * (1.0 - np.cos(th)), np.angle(np.exp(1j * th))])
+    keep = np.ones(t.size, bool) if gap is None else (t < gap[0]) | (t > gap[1])
+    odo_t = np.arange(0.0, 29.0, 0.1)
+    return RobotRecord(1, t[keep], pose[keep], odo_t, np.full(odo_t.size, 0.9 * v_mps),
+                       np.full(odo_t.size, 0.8 * omega_rad_s), _readings([]), _readings([]))
+
+
+def test_vicon_velocities_are_the_motion_and_a_gap_gives_none():
+    from swarmloc.deploy.lab.replay.motion_bound import vicon_velocities
+
+    rec = _circling(gap=(10.0, 12.0))
+    v, w = vicon_velocities(rec, rec.odometry_time_s)
+    in_gap = (rec.odometry_time_s > 9.5) & (rec.odometry_time_s < 12.5)
+    assert np.all(np.isnan(v[(rec.odometry_time_s > 10.1) & (rec.odometry_time_s < 11.9)]))
+    # A chord of the circle is a hair shorter than the arc: 0.1 s at 0.2 rad/s, relative 1.7e-5.
+    np.testing.assert_allclose(v[~in_gap], 0.1, rtol=1e-4)
+    np.testing.assert_allclose(w[~in_gap], 0.2, rtol=1e-6)
+
+
+def test_odometry_variants():
+    from swarmloc.deploy.lab.replay.motion_bound import odometry_variant
+
+    rec = _circling()
+    assert odometry_variant(rec, "commands") is rec
+    later = odometry_variant(rec, "commands-later", lag_s=0.2)
+    np.testing.assert_allclose(later.odometry_time_s, rec.odometry_time_s + 0.2)
+    np.testing.assert_array_equal(later.odometry_omega_rad_s, rec.odometry_omega_rad_s)
+    # Gains fitted against Vicon undo the commands' 0.9x and 0.8x.
+    gains = odometry_variant(rec, "commands-later-vicon-gains", lag_s=0.2)
+    np.testing.assert_allclose(gains.odometry_v_mps, 0.1, rtol=1e-4)
+    np.testing.assert_allclose(gains.odometry_omega_rad_s, 0.2, rtol=1e-6)
+    oracle = odometry_variant(rec, "vicon-velocities")
+    np.testing.assert_allclose(oracle.odometry_omega_rad_s, 0.2, rtol=1e-6)
+    with pytest.raises(ValueError, match="variant: expected one of commands"):
+        odometry_variant(rec, "wheel-model")
