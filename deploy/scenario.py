@@ -25,7 +25,9 @@ DEFAULT_SCENARIO = "ES1"
 #: spells the same values, which tests/test_scenario.py holds to this table).
 #:
 #: ``v0-defaults``: the e-puck defaults before issue 18, with which docs/social-odometry-000/ and
-#: -001/ were first made. Today's defaults are the readings of seeds 000 and 001 that their text
+#: -001/ were first made. ``v1-defaults``: issue 18's first defaults (giving up after twice the
+#: distance, ``p`` in centimetres), with which docs/so-000-readings/'s all-text group and
+#: docs/so-001-preview/ were made. Today's defaults are the readings of seeds 000 and 001 that their text
 #: supports (each quoted where it is implemented: ``AgentConfig.p_after_fusion``, ``sends``,
 #: ``give_up_factor``, ``encounter_memory``, ``odometry_k_m``, ``OdometryConfig.substeps``); the
 #: ablation behind them is docs/so-000-readings/.
@@ -37,6 +39,11 @@ VARIANTS: dict[str, tuple[str, ...]] = {
         "agent.encounter_memory=4",
         "agent.odometry_k_m=1.37e-4",
         "world.odometry.substeps=1",
+        "agent.confidence_unit_m=0.01",
+    ),
+    "v1-defaults": (
+        "agent.give_up_factor=2.0",
+        "agent.confidence_unit_m=0.01",
     ),
 }
 

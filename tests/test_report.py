@@ -249,6 +249,33 @@ def test_a_value_is_the_default_when_the_shipped_scenario_has_it_not_when_it_is_
     assert "sends" not in labels[("ES9", "v0")]
 
 
+def test_results_made_under_earlier_defaults_are_read_against_that_variant(tmp_path):
+    # so-000-readings: its all-text group was issue 18's first defaults (give up after twice the
+    # distance, p in cm: the variant v1-defaults), today's give up after 4 and count metres.
+    def group(name, round_trips):
+        return _rows("abl", name, "ES1", "SSGIKF", None, 10, 1800.0, round_trips, [300.0] * 3, [0.5] * 3)
+
+    rows = load_results(_write(tmp_path / "r.csv", group("all-text", [40, 41, 42]) + group("today", [50, 51, 52])))
+    fixed = {("abl", "all-text"): {"agent.give_up_factor": 2.0, "agent.confidence_unit_m": 0.01},
+             ("abl", "today"): {"agent.give_up_factor": 4.0, "agent.confidence_unit_m": 1.0}}
+    today = claims._Table(rows, fixed)
+    then = claims._Table(rows, fixed, "v1-defaults")
+    label = {(name, r["group"]): table.variant(r).label()
+             for name, table in (("today", today), ("then", then)) for r in table.rows}
+    assert label[("today", "today")] == "SSGIKF"
+    assert label[("today", "all-text")] == "SSGIKF confidence_unit_m=0.01, give_up_factor=2"
+    assert label[("then", "all-text")] == "SSGIKF"
+    assert label[("then", "today")] == "SSGIKF confidence_unit_m=1, give_up_factor=4"
+    # The claims read the box without a label: 41 under v1-defaults, 51 today.
+    ours = {name: {c.id: c.ours for c in claims.compare_with_papers(table)}
+            for name, table in (("today", today), ("then", then))}
+    assert ours["then"]["000/simulation-ES1-SGIKF/SSGIKF"] == "median 41"
+    assert ours["today"]["000/simulation-ES1-SGIKF/SSGIKF"] == "median 51"
+    with pytest.raises(ValueError, match="variant 'v9': no such variant"):
+        build_report(rows, tmp_path / "out", title="t", command="c", seeds_note="s", fixed=fixed,
+                     variant="v9")
+
+
 def test_a_numeric_grid_column_with_three_values_gets_a_line_figure(tmp_path):
     # The ES2 slip sweep's shape: NC and SSGIKF at slips 0.2, 0.1, 0.05; medians by hand.
     rows = []

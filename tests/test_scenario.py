@@ -221,21 +221,26 @@ def test_overrides_reach_the_loaded_scenario():
 # The e-puck defaults before issue 18, written out from the code they were (git show
 # 950bdf5-era AgentConfig / OdometryConfig), and the readings of the seeds that replaced them.
 V0_VALUES = {"p_after_fusion": "fused", "sends": "both", "give_up_factor": 0.0, "encounter_memory": 4,
-             "odometry_k_m": 1.37e-4, "substeps": 1}
-READING_VALUES = {"p_after_fusion": "distance", "sends": "last-visited", "give_up_factor": 2.0,
-                  "encounter_memory": 16, "odometry_k_m": 1.37e-5, "substeps": 10}
+             "odometry_k_m": 1.37e-4, "substeps": 1, "confidence_unit_m": 0.01}
+#: Issue 18's first defaults (the readings, giving up after twice the distance, p in cm).
+V1_VALUES = {"p_after_fusion": "distance", "sends": "last-visited", "give_up_factor": 2.0,
+             "encounter_memory": 16, "odometry_k_m": 1.37e-5, "substeps": 10, "confidence_unit_m": 0.01}
+#: Today's: giving up after 4 times the distance, p in metres (docs/so-000-untested/).
+READING_VALUES = {**V1_VALUES, "give_up_factor": 4.0, "confidence_unit_m": 1.0}
 
 
 def _issue_18_values(s: Scenario) -> dict:
     return {"p_after_fusion": s.agent.p_after_fusion, "sends": s.agent.sends,
             "give_up_factor": s.agent.give_up_factor, "encounter_memory": s.agent.encounter_memory,
-            "odometry_k_m": s.agent.odometry_k_m, "substeps": s.world.odometry.substeps}
+            "odometry_k_m": s.agent.odometry_k_m, "substeps": s.world.odometry.substeps,
+            "confidence_unit_m": s.agent.confidence_unit_m}
 
 
 @pytest.mark.parametrize("name", ["ES1", "ES3", "SO-4.0x4.0"])
-def test_defaults_are_the_seeds_readings_and_v0_defaults_the_old_ones(name):
+def test_defaults_are_the_seeds_readings_and_the_variants_the_old_ones(name):
     assert _issue_18_values(load_scenario(name)) == READING_VALUES
     assert _issue_18_values(load_scenario(name, variant_overrides("v0-defaults"))) == V0_VALUES
+    assert _issue_18_values(load_scenario(name, variant_overrides("v1-defaults"))) == V1_VALUES
 
 
 def test_cli_variant_is_applied_before_set_and_an_unknown_one_is_refused(capsys, no_run):

@@ -412,6 +412,10 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                    help="the experiment spec the results come from (shipped name or .toml), to "
                         "recover what its groups fix (default: the shipped spec named like the "
                         "experiment)")
+    p.add_argument("--variant", default=None, metavar="NAME",
+                   help="e-puck: read the results against the defaults of this named variant "
+                        "(e.g. v1-defaults for results made under issue 18's first defaults) "
+                        "instead of today's")
     p.add_argument("--regen-command", default=None, metavar="TEXT",
                    help="the command(s) the page states to regenerate it (default: the "
                         "experiment and report commands)")

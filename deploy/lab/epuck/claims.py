@@ -210,16 +210,18 @@ class Variant:
 _NO_VALUE = object()
 
 
-def _shipped_value(column: str, scenario) -> object:
+def _shipped_value(column: str, scenario, variant: str | None = None) -> object:
     """The value of the dotted key ``column`` in the shipped scenario ``scenario`` as it loads
-    today (its file, else the code's default); ``_NO_VALUE`` if there is no such scenario or key.
+    today (its file, else the code's default), or under the named ``variant``
+    (``swarmloc.deploy.scenario.VARIANTS``); ``_NO_VALUE`` if there is no such scenario or key.
     Issue 18's ablation sets every reading in every group, so "the default" of a column is what
-    a run without that setting does now, not the most common value among the groups."""
-    from swarmloc.deploy.scenario import builtin_names, load_scenario
+    a run without that setting does now (or under ``variant``: results made under earlier
+    defaults are read against those), not the most common value among the groups."""
+    from swarmloc.deploy.scenario import builtin_names, load_scenario, variant_overrides
 
     if not isinstance(scenario, str) or scenario not in builtin_names():
         return _NO_VALUE
-    node = load_scenario(scenario).to_dict()
+    node = load_scenario(scenario, variant_overrides(variant)).to_dict()
     for part in column.split("."):
         if not isinstance(node, dict) or part not in node:
             return _NO_VALUE
@@ -243,7 +245,8 @@ class _Table:
     sweep over the number of robots, and the best β of each Fermi variant."""
 
     def __init__(self, rows: Sequence[dict],
-                 fixed: dict[tuple[str, str], dict[str, object]] | None = None):
+                 fixed: dict[tuple[str, str], dict[str, object]] | None = None,
+                 variant: str | None = None):
         # Values a group fixes (its spec's ``set``) are not columns of the results; put them back
         # so that, e.g., "no odometry error" (slip_fraction = 0) is told apart from local imitation.
         fixed = fixed or {}
@@ -258,6 +261,7 @@ class _Table:
             self.rows.append(row)
         self._extra_columns = self._find_extra_columns()
         self._shipped_values: dict[tuple, object] = {}
+        self._defaults_variant = variant
         self._labelled_groups: set[tuple] = set()
         self._variants = {id(row): self._variant(row) for row in self.rows}
         # A (experiment, group, scenario) whose rows have several robot counts is a robots sweep
@@ -312,7 +316,7 @@ class _Table:
     def _shipped(self, column: str, scenario) -> object:
         key = (column, scenario)
         if key not in self._shipped_values:
-            self._shipped_values[key] = _shipped_value(column, scenario)
+            self._shipped_values[key] = _shipped_value(column, scenario, self._defaults_variant)
         return self._shipped_values[key]
 
     def _variant(self, row: dict) -> Variant:

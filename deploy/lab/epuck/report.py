@@ -538,7 +538,8 @@ def _setting_table(table: _Table) -> list[str]:
 def build_report(rows: Sequence[dict], out_dir: str | Path, *, title: str, command: str,
                  seeds_note: str, reasons: dict[str, str] | None = None,
                  page_name: str = "README.md", results_name: str | None = None,
-                 fixed: dict[tuple[str, str], dict[str, object]] | None = None) -> Path:
+                 fixed: dict[tuple[str, str], dict[str, object]] | None = None,
+                 variant: str | None = None) -> Path:
     """Write the figures (PNG) and the markdown page into ``out_dir``; return the page's path.
 
     ``rows`` as :func:`load_results` returns them. ``command`` is stated on the page as the way to
@@ -547,7 +548,10 @@ def build_report(rows: Sequence[dict], out_dir: str | Path, *, title: str, comma
     difference; the default is "not analysed yet". Only figures the rows can fill are drawn; the
     page lists the others and why. ``fixed`` maps (experiment, group) to the values the group
     fixes without a column in the results (see :func:`fixed_values_from_spec`); by default they
-    are read from the shipped spec named like each experiment, if there is one.
+    are read from the shipped spec named like each experiment, if there is one. ``variant``: read
+    the rows against the defaults of that named variant instead of today's (a value equal to the
+    default is no box label; the claims compare the boxes without one), for results made under
+    earlier defaults (e.g. ``v1-defaults``).
     """
     rows = list(rows)
     if not rows:
@@ -558,7 +562,14 @@ def build_report(rows: Sequence[dict], out_dir: str | Path, *, title: str, comma
                          f"{', '.join(paper_figures)}, optionally followed by /qualifier)")
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    table = _Table(rows, _fixed_values_of_shipped_specs(rows) if fixed is None else fixed)
+    if variant is not None:
+        from swarmloc.deploy.scenario import variant_overrides
+
+        try:
+            variant_overrides(variant)
+        except ConfigError as exc:
+            raise ValueError(str(exc)) from None
+    table = _Table(rows, _fixed_values_of_shipped_specs(rows) if fixed is None else fixed, variant)
     statuses = _draw_figures(table, out_dir)
     comparisons = compare_with_papers(table, reasons)
 
@@ -709,10 +720,12 @@ def write_from_args(paths: list[Path], args) -> Path:
             argv += ["--reasons", args.reasons]
         if args.spec:
             argv += ["--spec", args.spec]
+        if getattr(args, "variant", None):
+            argv += ["--variant", args.variant]
         command = shlex.join(argv)
     return build_report(rows, out, title=title, command=command, seeds_note=describe_seeds(rows),
                         reasons=reasons, page_name=args.page,
-                        results_name=", ".join(map(str, paths)), fixed=fixed)
+                        results_name=", ".join(map(str, paths)), fixed=fixed, variant=getattr(args, "variant", None))
 
 
 #: This family's template of ``swarmloc report`` (:data:`swarmloc.deploy.lab.report.TEMPLATES`).
