@@ -117,7 +117,7 @@ def start_swarm(sup: Supervisor, scenario_file: Path, *, run: str, robots: int, 
     if family_of(scenario_data(str(scenario_file))) == "foraging":
         # Forked from one warm server (deploy/fork/server.py), each its own process and session.
         server = sup.start(["agents", "--robots", f"0-{robots - 1}", *common, "--log-dir", str(log_dir),
-                            "--announce", "--die-with-parent"], stdout=subprocess.PIPE,
+                            "--announce", "--die-with-parent", str(os.getpid())], stdout=subprocess.PIPE,
                            log_path=log_dir / "agent-server.log",
                            env={"ZENOH_RUNTIME": ONE_THREAD_ZENOH_RUNTIME})
         agents = ForkedAgents(server, list(range(robots))).wait_forked(join_timeout_s)

@@ -209,6 +209,17 @@ def test_a_forked_agent_whose_server_died_first_does_not_start(tmp_path, late):
     assert not _wait_gone([child], 10)
 
 
+def test_an_agent_server_whose_launcher_is_already_gone_starts_nothing(tmp_path):
+    """``--die-with-parent PID`` (what ``swarmloc run`` passes, its own pid): a server whose
+    launcher died before the server asked for its signal ends at once instead of forking agents
+    that nothing would stop. Here the named launcher (pid 1) is not this server's parent."""
+    done = run_swarmloc(["agents", "--robots", "0-1", "-m", "client", "-e", "tcp/127.0.0.1:9", "--run",
+                         "gone", "--die-with-parent", "1", "--log-dir", str(tmp_path)], cwd=tmp_path, timeout_s=60)
+    assert done.returncode == 1, done.stderr
+    assert "the process that started this one (pid 1) is gone; not starting" in done.stderr
+    assert not list(tmp_path.glob("agent-*.log")), "no agent was forked"
+
+
 def _tcp_sockets_to(port: int) -> dict[int, str]:
     """inode -> local address of every IPv4 TCP connection to 127.0.0.1:``port``."""
     found = {}

@@ -148,8 +148,12 @@ def serve(args) -> int:
 
     signal.signal(signal.SIGTERM, on_signal)
     signal.signal(signal.SIGINT, on_signal)
-    if args.die_with_parent and not die_with_parent(signal.SIGTERM):
-        return 1
+    if args.die_with_parent is not None:
+        parent = None if args.die_with_parent < 0 else args.die_with_parent
+        if not die_with_parent(signal.SIGTERM, parent_pid=parent):
+            print(f"swarmloc agents: the process that started this one (pid "
+                  f"{parent if parent is not None else os.getppid()}) is gone; not starting", file=sys.stderr)
+            return 1
     if args.nice:
         os.nice(args.nice)  # inherited by every child
     log_dir = Path(args.log_dir) if args.log_dir else None
@@ -305,6 +309,8 @@ def add_parser(sub, agent_args) -> None:
     p.add_argument("--connect-from-stdin", action="store_true",
                    help="read one more -e endpoint from stdin once loaded, before forking (so a "
                         "launcher can start this server while the world is still starting)")
-    p.add_argument("--die-with-parent", action="store_true",
-                   help="stop every agent when the process that started this one dies")
+    p.add_argument("--die-with-parent", nargs="?", type=int, const=-1, default=None, metavar="PID",
+                   help="stop every agent when the process that started this one dies; give its "
+                        "PID if known (a launcher's own pid), so that a launcher that died before "
+                        "this process asked is noticed too")
     p.set_defaults(func=serve)
