@@ -21,9 +21,11 @@ Rules the design keeps:
   children stay in it, so the launcher's ``killpg`` (deploy/launch.py: Supervisor.stop_all)
   stops them all. A SIGTERM/SIGINT to the server is passed to every child, which closes its
   session and exits; children still there after ``STOP_GRACE_S`` are killed. Each child asks the
-  kernel for SIGTERM when the server dies (``PR_SET_PDEATHSIG``), and with ``--die-with-parent``
-  (what ``swarmloc run`` passes) so does the server when its own parent dies: a launcher killed
-  with SIGKILL leaves no agent behind.
+  kernel for SIGTERM when the server dies (``PR_SET_PDEATHSIG``), and with ``--die-with-parent
+  PID`` (what ``swarmloc run`` passes, with its own pid) so does the server when its own parent
+  dies: a launcher killed with SIGKILL leaves no agent behind. A parent can die before its child
+  has asked (the kernel then has nothing left to signal): each checks, once it has asked, that
+  its parent is still the one it was started by, and ends at once if not.
 - **The launcher sees each agent.** With ``--announce`` the server prints one JSON line per
   child, ``{"robot": ID, "pid": PID}`` once forked and ``{"robot": ID, "exit": CODE}`` once
   reaped (CODE as ``subprocess`` gives it: negative for a signal). :class:`ForkedAgents` reads
