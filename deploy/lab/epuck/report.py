@@ -709,6 +709,7 @@ def write_from_args(paths: list[Path], args) -> Path:
     out = Path(args.out) if args.out else Path("docs") / _slug("-".join(experiments))
     title = args.title or (f"Experiment {', '.join(experiments)}: our results next to the "
                            "papers'")
+    variant = getattr(args, "variant", None)  # absent from a Namespace built by hand
     command = args.regen_command
     if not command:
         argv = ["swarmloc", "report", *map(str, paths), "--out", str(out)]
@@ -720,12 +721,12 @@ def write_from_args(paths: list[Path], args) -> Path:
             argv += ["--reasons", args.reasons]
         if args.spec:
             argv += ["--spec", args.spec]
-        if getattr(args, "variant", None):
-            argv += ["--variant", args.variant]
+        if variant:
+            argv += ["--variant", variant]
         command = shlex.join(argv)
     return build_report(rows, out, title=title, command=command, seeds_note=describe_seeds(rows),
                         reasons=reasons, page_name=args.page,
-                        results_name=", ".join(map(str, paths)), fixed=fixed, variant=getattr(args, "variant", None))
+                        results_name=", ".join(map(str, paths)), fixed=fixed, variant=variant)
 
 
 #: This family's template of ``swarmloc report`` (:data:`swarmloc.deploy.lab.report.TEMPLATES`).

@@ -119,9 +119,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--duration-s", type=float, default=None)
     args = p.parse_args(argv)
     dataset = load_dataset(args.path)
+    config = ReplayConfig(algorithm="ekf", cooperative=True, duration_s=args.duration_s)
     rows = []
     for variant in VARIANTS:
-        config = ReplayConfig(algorithm="ekf", cooperative=True, duration_s=args.duration_s)
         rows.append((variant, score(run_replay(dataset_variant(dataset, variant, args.lag_s), config))))
     print(format_table(rows, dataset.robot_ids))
     return 0
