@@ -16,12 +16,11 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from mrclam_synthetic import SMALL, SYNTH_CAMERA, SYNTH_MOTION
 
 from swarmloc.agents.replay.ekf import EkfLocalizer, position_update, range_bearing_update
 from swarmloc.agents.replay.localizers import (
-    CameraNoise,
     LandmarkSetup,
-    MotionNoise,
     TeammateReport,
     build_localizer,
     decode_report,
@@ -30,7 +29,6 @@ from swarmloc.agents.replay.localizers import (
 from swarmloc.deploy.lab.replay.mrclam import ReplayConfig, fit_camera, run_replay, score
 from swarmloc.world.replay.mrclam import (
     MrclamFormatError,
-    SyntheticConfig,
     load_dataset,
     synthesize,
     write_dataset,
@@ -55,7 +53,6 @@ def dataset6():
     return load_dataset(DATASET6)
 
 
-SMALL = SyntheticConfig(n_robots=3, n_landmarks=8, duration_s=40.0)
 
 
 @pytest.fixture(scope="module")
@@ -435,9 +432,6 @@ def test_camera_calibration_recovers_a_known_bias():
 # Filters on synthetic runs with known truth
 # --------------------------------------------------------------------------------------------
 
-SYNTH_CAMERA = CameraNoise(range_std_m=0.05, range_fraction=0.0, bearing_std_rad=0.01)
-SYNTH_MOTION = MotionNoise(speed_fraction=0.1, speed_std_mps=0.005, turn_fraction=0.1,
-                           turn_std_rad_s=0.05, turn_per_speed_rad_m=0.0)
 
 
 def _run(data, algorithm, cooperative=False, seed=0, params=None, duration_s=None):

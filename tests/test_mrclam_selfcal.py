@@ -13,13 +13,14 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from mrclam_synthetic import SMALL, SYNTH_CAMERA, SYNTH_MOTION
 
 from swarmloc.agents.replay.calibration import (
     RangeBiasEstimator,
     SelfCalibratingLocalizer,
     SelfCalibrationParams,
 )
-from swarmloc.agents.replay.localizers import CameraNoise, LandmarkSetup, MotionNoise
+from swarmloc.agents.replay.localizers import CameraNoise, LandmarkSetup
 from swarmloc.agents.replay.populations import sensor_resetting_poses
 from swarmloc.deploy.lab.replay.mrclam import (
     KIDNAP_JUMP,
@@ -31,16 +32,11 @@ from swarmloc.deploy.lab.replay.mrclam import (
 )
 from swarmloc.world.replay.mrclam import (
     MrclamFormatError,
-    SyntheticConfig,
     load_dataset,
     synthesize,
     write_dataset,
 )
 
-SMALL = SyntheticConfig(n_robots=3, n_landmarks=8, duration_s=40.0)
-SYNTH_CAMERA = CameraNoise(range_std_m=0.05, range_fraction=0.0, bearing_std_rad=0.01)
-SYNTH_MOTION = MotionNoise(speed_fraction=0.1, speed_std_mps=0.005, turn_fraction=0.1,
-                           turn_std_rad_s=0.05, turn_per_speed_rad_m=0.0)
 C0, C2 = 0.04, -0.45  # Dataset 6's order of magnitude (fit_camera: c0 0.025-0.052, c2 about -0.47)
 
 

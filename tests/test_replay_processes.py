@@ -26,10 +26,16 @@ DATASET = Path(__file__).resolve().parents[2] / "shared" / "data" / "mrclam" / "
 
 
 @pytest.mark.skipif(not DATASET.is_dir(), reason=f"MRCLAM Dataset 6 not found at {DATASET}")
-@pytest.mark.parametrize("algorithm", ["ekf", "pf"])
-def test_replay_over_processes_gives_the_in_process_estimates(tmp_path, algorithm):
+@pytest.mark.parametrize("algorithm, start, duration_s", [
+    ("ekf", "known", 10.0), ("pf", "known", 10.0), ("hybrid", "unknown", 30.0)])
+def test_replay_over_processes_gives_the_in_process_estimates(tmp_path, algorithm, start,
+                                                              duration_s):
+    """The hybrid from an unknown start: the particle filter's search, the handover to the EKF
+    (robots 1 and 3 of Dataset 6 are handed over at about 14 s) and the cooperation of both
+    stages, over processes."""
     scenario = load_any("mrclam6-ekf-coop", {"seed": 3, "algorithm": algorithm},
-                        [f"dataset={json.dumps(str(DATASET))}", "duration_s=10.0"])
+                        [f"dataset={json.dumps(str(DATASET))}", f"duration_s={duration_s}",
+                         f"start={json.dumps(start)}"])
     path = tmp_path / "scenario.json"
     path.write_text(json.dumps(scenario.to_dict()))
     out = tmp_path / "out"
@@ -44,8 +50,11 @@ def test_replay_over_processes_gives_the_in_process_estimates(tmp_path, algorith
     assert result["reason"] == "completed" and result["rejected"] == {}
     replay = scenario.scenario
     local = score(run_replay(replay.load(), replay.config()))
-    assert result["metrics"]["ticks"] == 500
+    assert result["metrics"]["ticks"] == round(duration_s / 0.02)
     assert result["metrics"]["robots"] == {  # the scores that exist (finite)
         str(rid): {k: v for k, v in s.items() if math.isfinite(v)} for rid, s in local.items()}
-    for figures in local.values():  # a localizer that works, not just two equal failures
-        assert figures["position_rmse_m"] < 0.3
+    # A localizer that works, not just two equal failures.
+    if start == "known":
+        assert all(figures["position_rmse_m"] < 0.3 for figures in local.values())
+    else:
+        assert sum(figures["localized_s"] < 20.0 for figures in local.values()) >= 2

@@ -32,7 +32,10 @@ Algorithms (registry :data:`ALGORITHMS`, built by :func:`build_localizer`):
   residuals, over the landmark readings of the last second); cooperative: 003 §IV-B's virtual
   population and virtual niches, the teammates' above-average individuals turned into
   hypotheses of this robot's position by the range-and-bearing reading between the two robots,
-  and the teammates' readings as further fitness terms.
+  and the teammates' readings as further fitness terms;
+- ``hybrid``: the particle filter searches, the EKF tracks once the particles agree with each
+  other and with the readings, and the search starts again when the EKF counts itself lost
+  (:mod:`swarmloc.agents.replay.hybrid`).
 
 Particle filter and GA run their measurement step (correction/generation) on the ticks that
 bring a landmark or teammate measurement and only move their hypotheses with the odometry in
@@ -45,7 +48,8 @@ measurement models, the teammate reports, dead reckoning and the registry.
 
 Every localizer starts from the known initial pose (the data sets' convention for tracking; the
 MRCLAM literature initialises from the first ground-truth pose) with ``initial_std``; or, for
-the population localizers (``pf``, ``cfsga``), from an unknown one: ``LandmarkSetup.initial_area_m``
+the population localizers (``pf``, ``cfsga``, and ``hybrid``, which searches with the ``pf``), from an
+unknown one: ``LandmarkSetup.initial_area_m``
 (uniform over that area and every heading, issue 19).
 
 Noise parameters. :class:`CameraNoise`'s defaults are the raw camera of
@@ -771,7 +775,8 @@ def register(algorithm: Algorithm) -> None:
 
 def build_localizer(name: str, setup: LandmarkSetup, rng: np.random.Generator,
                     params: Mapping | None = None) -> LandmarkLocalizer:
-    """The localizer of algorithm ``name`` (``dr``, ``ekf``, ``pf``, ``cfsga``) for one robot;
+    """The localizer of algorithm ``name`` (``dr``, ``ekf``, ``pf``, ``cfsga``, ``hybrid``) for one
+    robot;
     ``params`` are the algorithm's parameters by name (unknown names are rejected)."""
     if name not in ALGORITHMS:
         close = difflib.get_close_matches(str(name), ALGORITHMS.names(), n=1, cutoff=0.3)
@@ -809,3 +814,13 @@ register(Algorithm("dr", "dead reckoning; cooperative: social odometry (SGIKF)",
 register(Algorithm("ekf", "EKF with known landmarks; cooperative: relative updates", _build_ekf))
 register(Algorithm("pf", "AMCL-style particle filter; cooperative: teammates' beliefs", _build_pf))
 register(Algorithm("cfsga", "CFS-GA; cooperative: virtual population", _build_cfsga))
+
+
+def _build_hybrid(setup, rng, params):
+    from swarmloc.agents.replay.hybrid import HybridLocalizer
+
+    return HybridLocalizer(setup, params, rng)
+
+
+register(Algorithm("hybrid", "particle filter search, EKF tracking; cooperative: the active stage's",
+                   _build_hybrid))

@@ -325,6 +325,12 @@ class ParticleFilterLocalizer:
     def rejected(self):
         return self.coop.rejected
 
+    @property
+    def covariance(self) -> np.ndarray:
+        """The pose covariance broadcast to the teammates: the weighted particles' at the last
+        update, grown by the motion noise since."""
+        return self._cov.copy()
+
     def step(self, obs: LandmarkObservation) -> None:
         setup = self.setup
         check_observation(obs, setup.robot_id)

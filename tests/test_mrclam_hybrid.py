@@ -1,0 +1,246 @@
+"""The hybrid landmark localizer (``agents/replay/hybrid.py``): particle filter search, EKF
+tracking, the handover's consistency test, the loss and the search that follows (issue 19).
+
+Synthetic data sets (``synthesize``) carry known ground truth; Dataset 6 tests are skipped
+when the data set is absent.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mrclam_synthetic import SMALL, SYNTH_CAMERA, SYNTH_MOTION
+
+from swarmloc.agents.replay.calibration import SelfCalibratingLocalizer
+from swarmloc.agents.replay.hybrid import SEARCH, TRACK, HybridLocalizer, search_area
+from swarmloc.agents.replay.localizers import (
+    LandmarkSetup,
+    build_localizer,
+)
+from swarmloc.agents.replay.populations import ParticleFilterLocalizer
+from swarmloc.deploy.lab.replay.mrclam import (
+    ReplayConfig,
+    replay_localizer,
+    replay_world,
+    run_replay,
+    score,
+)
+from swarmloc.world.replay.mrclam import load_dataset, synthesize
+from swarmloc.world.replay.replay import LandmarkObservation
+
+DATASET6 = Path(__file__).resolve().parents[2] / "shared" / "data" / "mrclam" / "MRCLAM_Dataset6"
+
+
+@pytest.fixture(scope="module")
+def synthetic():
+    return synthesize(SMALL, np.random.default_rng(11))
+
+
+def _config(**kw) -> ReplayConfig:
+    base = {"algorithm": "hybrid", "motion": SYNTH_MOTION, "camera": SYNTH_CAMERA,
+            "calibration": "none"}
+    return ReplayConfig(**{**base, **kw})
+
+
+def _drive(data, config):
+    """``run_replay``'s loop, keeping the brains: ``(brains by id, errors (T, N), robot ids)``."""
+    world = replay_world(data, config)
+    initial = world.initial_poses()
+    brains = {rid: replay_localizer(data, world, config, rid, initial[i])
+              for i, rid in enumerate(world.robot_ids)}
+    truth = world.ground_truth()
+    errors = np.empty((world.n_ticks, len(world.robot_ids)))
+    while not world.done:
+        k, outgoing = world.tick, {}
+        for i, obs in enumerate(world.observe()):
+            brains[obs.robot_id].step(obs)
+            errors[k, i] = np.hypot(*(brains[obs.robot_id].estimate()[:2] - truth[k, i, :2]))
+            outgoing[obs.robot_id] = brains[obs.robot_id].outgoing()
+        world.step(outgoing)
+    return brains, errors, world.robot_ids
+
+
+# --------------------------------------------------------------------------------------------
+# Closed loop on synthetic runs
+# --------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("cooperative", [False, True])
+def test_unknown_start_searches_then_hands_over_to_the_ekf(synthetic, cooperative):
+    """From a uniform belief every robot of the synthetic run (8 landmarks, 40 s) is handed
+    over to the EKF in each of 3 seeds, gets under 0.3 m to stay before the end with an RMSE
+    under 0.2 m from then on, and no robot is handed over while its estimate is 0.5 m or more
+    off (the handover's consistency test)."""
+    for seed in range(3):
+        brains, errors, ids = _drive(synthetic, _config(start="unknown", seed=seed,
+                                                        cooperative=cooperative))
+        assert errors[0].max() > 0.3  # it did start lost
+        for i, rid in enumerate(ids):
+            brain = brains[rid]
+            assert brain.phase == TRACK and brain.handovers >= 1, (seed, rid)
+        result = run_replay(synthetic, _config(start="unknown", seed=seed,
+                                               cooperative=cooperative))
+        np.testing.assert_allclose(result.position_error_m(), errors, rtol=0, atol=1e-12)
+        for rid, s in score(result).items():
+            assert s["localized_s"] < 38.0, (seed, rid, s)
+            assert s["rmse_localized_m"] < 0.2, (seed, rid, s)
+
+
+def _collapsed(wrong: bool, params=None):
+    """A stationary robot at the origin (heading 0) reading, one per tick (0.02 s), landmark A
+    at (2, 0) and landmark B at (0, 2) in turn, its hybrid's particle set collapsed (std 0.01)
+    on the truth or, ``wrong``, on the pose (2, -2, pi/2): on A's circle, facing A, so that it
+    explains A's reading exactly and B's not at all (the particle filter's robust likelihood
+    takes B's readings for misreads). The search's recovery is off, so that the set stays where
+    it is and only the handover rule is tested (with it on, a B reading makes the filter inject
+    particles from B's circle and the set finds the truth within a few ticks). Returns the phase and the estimate's error after each of 300 ticks."""
+    landmarks = np.array([[2.0, 0.0], [0.0, 2.0]])
+    setup = LandmarkSetup(robot_id=1, landmark_ids=np.array([6, 7]), landmark_xy_m=landmarks,
+                          initial_pose=np.zeros(3), camera=SYNTH_CAMERA, motion=SYNTH_MOTION,
+                          initial_area_m=(-3.0, -3.0, 3.0, 3.0))
+    hybrid = HybridLocalizer(setup, {"recovery": False, **(params or {})},
+                             np.random.default_rng(0))
+    start = np.array([2.0, -2.0, math.pi / 2]) if wrong else np.zeros(3)
+    collapsed = replace(setup, initial_area_m=None, initial_std=(0.01, 0.01, 0.01),
+                        initial_pose=start)
+    hybrid.pf = ParticleFilterLocalizer(collapsed, hybrid.pf_params, np.random.default_rng(1))
+    rng = np.random.default_rng(2)
+    phases, errors = [], []
+    for k in range(300):
+        d = landmarks[k % 2]
+        obs = LandmarkObservation(
+            robot_id=1, tick=k, time_s=0.02 * (k + 1), odometry_v_mps=0.0,
+            odometry_omega_rad_s=0.0, odometry_dt_s=0.02, landmark_ids=np.array([6 + k % 2]),
+            landmark_range_m=np.array([math.hypot(*d) + rng.normal() * 0.01]),
+            landmark_bearing_rad=np.array([math.atan2(d[1], d[0]) + rng.normal() * 0.002]),
+            robot_ids=np.zeros(0, np.int64), robot_range_m=np.zeros(0),
+            robot_bearing_rad=np.zeros(0))
+        hybrid.step(obs)
+        phases.append(hybrid.phase)
+        errors.append(float(np.hypot(*hybrid.estimate()[:2])))
+    return np.array([p == TRACK for p in phases]), np.array(errors)
+
+
+def test_a_set_collapsed_on_the_truth_is_handed_over():
+    tracking, errors = _collapsed(wrong=False)
+    first = int(np.argmax(tracking))
+    assert tracking[first] and first < 40  # 10 tight updates and a full window of 20 readings
+    assert tracking[first:].all() and errors[first:].max() < 0.1
+
+
+def test_a_set_collapsed_on_a_wrong_pose_is_not_handed_over():
+    """The wrong set is tight, but half the readings fall outside the gate of its estimate: it
+    is not handed over. Without the consistency test (any share of outliers accepted) it is."""
+    tracking, errors = _collapsed(wrong=True)
+    assert errors.min() > 2.0  # the set stays wrong
+    assert not tracking.any()
+    tracking, errors = _collapsed(wrong=True, params={"handover_outlier_fraction": 1.0})
+    assert (tracking & (errors > 0.3)).any()
+
+
+def test_known_start_is_the_ekf_until_lost(synthetic):
+    """With a known start the hybrid tracks with the EKF from the first tick: the very EKF
+    estimates, as long as it is never lost."""
+    for cooperative in (False, True):
+        hybrid = run_replay(synthetic, _config(cooperative=cooperative))
+        ekf = run_replay(synthetic, _config(algorithm="ekf", cooperative=cooperative))
+        np.testing.assert_array_equal(hybrid.estimates, ekf.estimates)
+
+
+def test_kidnap_is_detected_and_the_search_recovers(synthetic):
+    """A kidnap (the odometry jumps 2 m): the EKF alone gates every later reading out and never
+    recovers; the hybrid counts itself lost, searches with the particle filter, hands over again
+    and is back under 0.3 m to stay within 20 s."""
+    config = _config(kidnap_s=15.0, kidnap_robot=2)
+    brains, _, ids = _drive(synthetic, config)
+    hybrid = brains[2]
+    assert hybrid.losses == 1 and hybrid.handovers == 1 and hybrid.phase == TRACK
+    assert all(brains[r].losses == 0 for r in ids if r != 2)
+    recovery = score(run_replay(synthetic, config))[2]["recovery_s"]
+    assert 0.0 < recovery < 20.0
+    ekf = score(run_replay(synthetic, replace(config, algorithm="ekf")))[2]
+    assert math.isnan(ekf["recovery_s"]) and ekf["final_error_m"] > 1.0
+
+
+@pytest.mark.parametrize("seed", [4, 5])
+def test_same_seed_same_estimates(synthetic, seed):
+    a = run_replay(synthetic, _config(start="unknown", cooperative=True, seed=seed,
+                                      duration_s=10.0))
+    b = run_replay(synthetic, _config(start="unknown", cooperative=True, seed=seed,
+                                      duration_s=10.0))
+    c = run_replay(synthetic, _config(start="unknown", cooperative=True, seed=seed + 10,
+                                      duration_s=10.0))
+    np.testing.assert_array_equal(a.estimates, b.estimates)
+    assert not np.array_equal(a.estimates, c.estimates)
+
+
+# --------------------------------------------------------------------------------------------
+# Parameters, calibration wrapper
+# --------------------------------------------------------------------------------------------
+
+
+def _setup(**kw):
+    return LandmarkSetup(robot_id=1, landmark_ids=np.array([6, 7]),
+                         landmark_xy_m=np.array([[2.0, 0.0], [0.0, 2.0]]),
+                         initial_pose=np.zeros(3), **kw)
+
+
+def test_parameters_go_to_their_stage():
+    hybrid = build_localizer("hybrid", _setup(initial_area_m=(0.0, 0.0, 2.0, 2.0)),
+                             np.random.default_rng(0),
+                             {"gate_chi2": 5.0, "min_particles": 100, "handover_updates": 3})
+    assert hybrid.phase == SEARCH
+    assert hybrid.ekf_params.gate_chi2 == 5.0
+    assert hybrid.params.handover_updates == 3
+    assert hybrid.pf.amcl_params.min_particles == 100
+    assert hybrid.pf.amcl_params.recovery  # the search's default
+
+
+@pytest.mark.parametrize("params, message", [
+    ({"handover_update": 3}, "did you mean 'handover_updates'"),
+    ({"handover_floor_std": [0.2]}, "handover_floor_std must be 2 numbers"),
+    ({"lost_fraction": 1.5}, "lost_fraction must lie in"),
+    ({"consistency_window": 0}, "consistency_window must be an integer >= 1"),
+    ({"handover_position_std_m": -1.0}, "handover_position_std_m must be >= 0"),
+])
+def test_bad_parameters_are_named(params, message):
+    with pytest.raises(ValueError, match=message):
+        build_localizer("hybrid", _setup(), np.random.default_rng(0), params)
+
+
+def test_search_area_is_the_start_area_or_the_landmarks_box():
+    assert search_area(_setup()) == (0.0, 0.0, 2.0, 2.0)
+    assert search_area(_setup(initial_area_m=(-1.0, -1.0, 3.0, 4.0))) == (-1.0, -1.0, 3.0, 4.0)
+
+
+def test_self_calibration_reaches_both_stages():
+    """The self-calibrating wrapper replaces the localizer's setup (its camera); the hybrid
+    hands the camera to the stage that runs, and keeps each stage's own start."""
+    hybrid = build_localizer("hybrid", _setup(initial_area_m=(0.0, 0.0, 2.0, 2.0)),
+                             np.random.default_rng(0), {})
+    wrapped = SelfCalibratingLocalizer(hybrid)
+    camera = replace(hybrid.setup.camera, range_bias_c0=0.03)
+    wrapped.inner.setup = replace(hybrid.setup, camera=camera)
+    assert hybrid.pf.setup.camera == camera
+    assert hybrid.pf.setup.initial_area_m == (0.0, 0.0, 2.0, 2.0)
+
+
+# --------------------------------------------------------------------------------------------
+# Dataset 6
+# --------------------------------------------------------------------------------------------
+
+
+@pytest.mark.skipif(not (DATASET6 / "Barcodes.dat").is_file(),
+                    reason=f"MRCLAM Dataset 6 not found at {DATASET6}")
+def test_dataset6_unknown_start_cooperative():
+    """Dataset 6, unknown start, cooperative, seed 0, the first 120 s: at least 3 of the 5
+    robots under 0.3 m within 60 s (issue 19's bar) and staying there to 120 s. The particle
+    filter alone reaches 48 of 100 robot-seeds over 20 seeds (docs/mrclam)."""
+    result = run_replay(load_dataset(DATASET6), ReplayConfig(
+        algorithm="hybrid", cooperative=True, start="unknown", duration_s=120.0))
+    localized = [s["localized_s"] for s in score(result).values()]
+    assert sum(t <= 60.0 for t in localized if math.isfinite(t)) >= 3, localized
