@@ -28,10 +28,14 @@ State: the pose ``(x_m, y_m, theta_rad)`` and its covariance ``P`` (3 x 3).
   walk of ``odometry_drift_std`` per square-root second keeps them able to follow a slow
   change. Ground truth is not used: only the readings. Our choice (the seeds do not calibrate
   odometry); the motion noise is unchanged. The teammates see the pose block only. Measured on
-  Dataset 6 (cooperative, self-calibrated camera, seed 0): no gain (mean 0.100 m against
-  0.099 m), and none either with the scales held at the Vicon regression's values (0.099 m):
-  the ratio of true to commanded turn is not a constant (about 0.7 while driving at 0.07 m/s
-  and turning, about 1.0 while creeping; see ``docs/mrclam/README.md``), so it stays off.
+  Dataset 6 (cooperative, self-calibrated camera, seed 0): with these priors no gain (mean
+  0.100 m against 0.099 m), and none either with the scales held at the Vicon regression's
+  values (0.099 m): the ratio of true to commanded turn is not a constant (about 0.7 while
+  driving at 0.07 m/s and turning, about 1.0 while creeping; see ``docs/mrclam/README.md``).
+  The speed scale alone (``odometry_prior_std = (0.1, 0, 0)``: the turn scale and offset held)
+  does help: mean 0.178 -> 0.158 m alone, 0.099 -> 0.092 m cooperative (worst robot 0.117 ->
+  0.112 m). It is the hybrid's tracking default (:mod:`swarmloc.agents.replay.hybrid`); the
+  ``ekf`` algorithm stays the literature's filter, commands as odometry, by default.
 - **Cooperative** (``setup.cooperative``): each robot broadcasts a
   :class:`~swarmloc.agents.replay.localizers.TeammateReport` (pose, covariance, the teammates it
   measured). With ``fusion="relative"`` a reading between this robot and teammate ``j``
