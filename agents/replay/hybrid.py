@@ -72,8 +72,9 @@ from swarmloc.world.replay.replay import LandmarkObservation
 HYBRID_PF_DEFAULTS = {"recovery": True}
 #: The tracking stage's EKF: the odometry's speed scale estimated in the state (the EKF's
 #: ``odometry_calibration``, prior std 0.1: MRCLAM's robots drive about 0.9 of the commanded
-#: distance), the turn scale and offset held at 1 and 0 (their ratio to the command is not a
-#: constant; see :mod:`swarmloc.agents.replay.ekf`). Measured on Dataset 6 (cooperative,
+#: distance), the turn scale and offset starting known at 1 and 0 (prior std 0; they move only
+#: by the EKF's slow random walk, ``odometry_drift_std``: their ratio to the command is not a
+#: constant, see :mod:`swarmloc.agents.replay.ekf`). Measured on Dataset 6 (cooperative,
 #: unknown start, 20 seeds, 180 s; robot-seeds under 0.3 m within 60 s and staying there):
 #: 73/100 without it, 86/100 with it (robot 2, 45 s without a landmark from 111 s: 0/20 ->
 #: 15/20); speed, turn and offset (prior stds 0.2, 0.3, 0.03, the EKF's) 79/100, (0.1, 0.15,
@@ -101,8 +102,9 @@ def _fraction(value, name: str) -> float:
 class HybridParams:
     """The hybrid's own parameters (see the module docstring). The handover floor was chosen on
     Dataset 6 (unknown start, cooperative, 20 seeds, 180 s: robot-seeds under 0.3 m within
-    60 s and staying there; the other choices measured are in ``docs/mrclam/README.md``):
-    (0.2 m, 0.1 rad) 73/100, (0.15, 0.08) 72/100; without a floor (a prototype) 62/100."""
+    60 s and staying there; the other choices measured are in ``docs/mrclam/README.md``),
+    before the EKF stage estimated the speed scale: (0.2 m, 0.1 rad) 73/100, (0.15, 0.08)
+    72/100; without a floor (a prototype) 62/100."""
 
     handover_position_std_m: float = 0.1
     handover_heading_std_rad: float = 0.1
