@@ -23,10 +23,7 @@ from swarmloc.agents.replay.hybrid import (
     HybridLocalizer,
     search_area,
 )
-from swarmloc.agents.replay.localizers import (
-    LandmarkSetup,
-    build_localizer,
-)
+from swarmloc.agents.replay.localizers import CameraNoise, LandmarkSetup, build_localizer
 from swarmloc.agents.replay.populations import ParticleFilterLocalizer
 from swarmloc.deploy.lab.replay.mrclam import (
     ReplayConfig,
@@ -150,9 +147,11 @@ def test_a_set_collapsed_on_a_wrong_pose_is_not_handed_over():
 
 def test_known_start_is_the_ekf_until_lost(synthetic):
     """With a known start the hybrid tracks with the EKF (its speed scale estimated) from the
-    first tick: the very EKF estimates, as long as it is never lost."""
+    first tick: the very EKF estimates, as long as it is never lost (the synthetic camera has
+    no bias, and the doubt of an uncalibrated one is off here)."""
     for cooperative in (False, True):
-        hybrid = run_replay(synthetic, _config(cooperative=cooperative))
+        hybrid = run_replay(synthetic, _config(cooperative=cooperative,
+                                               params={"uncalibrated_range_fraction": 0.0}))
         ekf = run_replay(synthetic, _config(algorithm="ekf", cooperative=cooperative,
                                             params=HYBRID_EKF_DEFAULTS))
         np.testing.assert_array_equal(hybrid.estimates, ekf.estimates)
@@ -216,10 +215,30 @@ def test_parameters_go_to_their_stage():
     ({"lost_fraction": 1.5}, "lost_fraction must lie in"),
     ({"consistency_window": 0}, "consistency_window must be an integer >= 1"),
     ({"handover_position_std_m": -1.0}, "handover_position_std_m must be >= 0"),
+    ({"uncalibrated_range_fraction": 2.0}, "uncalibrated_range_fraction must lie in"),
 ])
 def test_bad_parameters_are_named(params, message):
     with pytest.raises(ValueError, match=message):
         build_localizer("hybrid", _setup(), np.random.default_rng(0), params)
+
+
+def test_the_tracking_stage_doubts_ranges_until_the_camera_is_calibrated():
+    """With no range-bias correction the EKF stage's range noise is at least
+    ``uncalibrated_range_fraction`` of the range; once the self-calibration hands a corrected
+    camera over (or the camera came corrected), the camera's own noise."""
+    camera = CameraNoise(range_fraction=0.04)
+    hybrid = build_localizer("hybrid", _setup(camera=camera), np.random.default_rng(0), {})
+    assert hybrid.phase == TRACK and hybrid.params.uncalibrated_range_fraction == 0.08
+    assert hybrid.ekf.setup.camera.range_fraction == 0.08
+    assert hybrid.setup.camera.range_fraction == 0.04  # the search's camera is untouched
+    corrected = replace(camera, range_bias_c0=0.03, range_fraction=0.03)
+    hybrid.setup = replace(hybrid.setup, camera=corrected)
+    assert hybrid.ekf.setup.camera == corrected
+    biased = build_localizer("hybrid", _setup(camera=corrected), np.random.default_rng(0), {})
+    assert biased.ekf.setup.camera == corrected
+    off = build_localizer("hybrid", _setup(camera=camera), np.random.default_rng(0),
+                          {"uncalibrated_range_fraction": 0.0})
+    assert off.ekf.setup.camera == camera
 
 
 def test_search_area_is_the_start_area_or_the_landmarks_box():

@@ -34,7 +34,7 @@ State: the pose ``(x_m, y_m, theta_rad)`` and its covariance ``P`` (3 x 3).
   driving at 0.07 m/s and turning, about 1.0 while creeping; see ``docs/mrclam/README.md``).
   The speed scale alone (``odometry_prior_std = (0.1, 0, 0)``: the turn scale and offset held)
   does help: mean 0.178 -> 0.158 m alone, 0.099 -> 0.092 m cooperative (worst robot 0.117 ->
-  0.112 m). It is the hybrid's tracking default (:mod:`swarmloc.agents.replay.hybrid`); the
+  0.112 m). It is part of the hybrid's tracking default (:mod:`swarmloc.agents.replay.hybrid`); the
   ``ekf`` algorithm stays the literature's filter, commands as odometry, by default.
 - **Cooperative** (``setup.cooperative``): each robot broadcasts a
   :class:`~swarmloc.agents.replay.localizers.TeammateReport` (pose, covariance, the teammates it
