@@ -241,6 +241,19 @@ def test_the_tracking_stage_doubts_ranges_until_the_camera_is_calibrated():
     assert off.ekf.setup.camera == camera
 
 
+def test_a_bad_observation_is_named_in_either_stage():
+    empty = np.zeros(0)
+    bad = LandmarkObservation(
+        robot_id=1, tick=0, time_s=0.02, odometry_v_mps=float("nan"), odometry_omega_rad_s=0.0,
+        odometry_dt_s=0.02, landmark_ids=np.zeros(0, np.int64), landmark_range_m=empty,
+        landmark_bearing_rad=empty, robot_ids=np.zeros(0, np.int64), robot_range_m=empty,
+        robot_bearing_rad=empty)
+    for area in (None, (0.0, 0.0, 2.0, 2.0)):
+        hybrid = build_localizer("hybrid", _setup(initial_area_m=area), np.random.default_rng(0), {})
+        with pytest.raises(ValueError, match="obs.odometry_v_mps must be finite"):
+            hybrid.step(bad)
+
+
 def test_search_area_is_the_start_area_or_the_landmarks_box():
     assert search_area(_setup()) == (0.0, 0.0, 2.0, 2.0)
     assert search_area(_setup(initial_area_m=(-1.0, -1.0, 3.0, 4.0))) == (-1.0, -1.0, 3.0, 4.0)

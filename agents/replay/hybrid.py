@@ -63,6 +63,7 @@ from swarmloc.agents.replay.localizers import (
     LandmarkSetup,
     _real,
     calibrated,
+    check_observation,
     propagate,
     spectral_norm_xy,
 )
@@ -263,6 +264,7 @@ class HybridLocalizer:
         self._lost.clear()
 
     def step(self, obs: LandmarkObservation) -> None:
+        check_observation(obs, self._setup.robot_id)  # before the search's own use of it
         stage = self.active
         if self.phase == SEARCH:
             self._search_step(obs)
@@ -276,7 +278,7 @@ class HybridLocalizer:
                                           obs.odometry_omega_rad_s, obs.odometry_dt_s,
                                           setup.motion)
         updates = pf.updates
-        pf.step(obs)  # checks the observation first
+        pf.step(obs)
         if obs.landmark_ids.size:
             corrected = calibrated(obs, setup.camera)
             xy, known = setup.landmark_positions(corrected.landmark_ids)
