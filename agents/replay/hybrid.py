@@ -21,18 +21,19 @@ So each robot runs one of the two at a time:
 - **track**: the EKF (``ekf``, :mod:`swarmloc.agents.replay.ekf`, with the odometry's speed scale
   in its state, :data:`HYBRID_EKF_DEFAULTS`, and while the camera's range bias is not yet
   corrected a range noise of at least ``uncalibrated_range_fraction`` of the range) from the
-  particles' mean and
-  covariance, each variance raised to at least ``handover_floor_std`` squared (position, heading):
-  the particles' spread underestimates the error of a set that just collapsed;
+  particles' mean and covariance, each variance raised to at least ``handover_floor_std``
+  squared (position, heading): the particles' spread underestimates the error of a set that
+  just collapsed;
 - **loss**: when at least ``lost_fraction`` of the last ``lost_window`` landmark readings fall
   outside the EKF's gate (the EKF leaves them out, so it would never correct itself), the robot
   counts itself lost and the search starts again from a uniform belief over the start area (a
   kidnap: :class:`~swarmloc.deploy.lab.replay.mrclam.ReplayConfig`'s ``kidnap_s``).
 
 With a known start the robot starts tracking (the EKF from the initial pose), so the hybrid is
-also the EKF (with its speed scale) and a kidnap recovery. Cooperative: the active stage's cooperation (the particle
-filter's teammate reweighting, the EKF's relative updates) and its report; a searching robot's
-report carries the particles' wide covariance, which the teammates' filters weigh accordingly.
+also the EKF (with its speed scale) and a kidnap recovery. Cooperative: the active stage's
+cooperation (the particle filter's teammate reweighting, the EKF's relative updates) and its
+report; a searching robot's report carries the particles' wide covariance, which the
+teammates' filters weigh accordingly.
 
 Parameters: the keys of :class:`HybridParams` are the hybrid's, those of
 :class:`~swarmloc.agents.replay.ekf.EkfParams` go to the EKF, every other key to the particle
@@ -50,7 +51,6 @@ Pure: no clock; the particle filter draws from the robot's generator.
 
 from __future__ import annotations
 
-import difflib
 import math
 from collections import deque
 from collections.abc import Mapping
@@ -65,9 +65,10 @@ from swarmloc.agents.replay.localizers import (
     calibrated,
     check_observation,
     propagate,
+    reject_unknown_keys,
     spectral_norm_xy,
 )
-from swarmloc.agents.replay.populations import PF_AMCL_DEFAULTS, ParticleFilterLocalizer, PfParams
+from swarmloc.agents.replay.populations import ParticleFilterLocalizer, PfParams, pf_params
 from swarmloc.world.replay.replay import LandmarkObservation
 
 #: The search stage's particle filter: recovery on (sensor resetting), every other parameter
@@ -155,20 +156,14 @@ def split_params(params: Mapping) -> tuple[HybridParams, EkfParams, dict]:
 
     own_names = {f.name for f in fields(HybridParams)}
     ekf_names = {f.name for f in fields(EkfParams)}
-    pf_names = {f.name for f in fields(PfParams)}
-    known = sorted(own_names | ekf_names | pf_names | {f.name for f in fields(AMCLParams)})
-    for key in params:
-        if key not in known:
-            close = difflib.get_close_matches(str(key), known, n=1, cutoff=0.5)
-            hint = f"; did you mean {close[0]!r}?" if close else ""
-            raise ValueError(f"{key}: unknown hybrid parameter{hint}")
+    reject_unknown_keys(params, sorted(own_names | ekf_names | {f.name for f in fields(PfParams)}
+                                       | {f.name for f in fields(AMCLParams)}), "hybrid")
     own = HybridParams(**{k: v for k, v in params.items() if k in own_names})
     ekf = EkfParams(**{**HYBRID_EKF_DEFAULTS,
                        **{k: v for k, v in params.items() if k in ekf_names}})
     pf = {**HYBRID_PF_DEFAULTS,
           **{k: v for k, v in params.items() if k not in own_names | ekf_names}}
-    PfParams(**{k: v for k, v in pf.items() if k in pf_names})
-    AMCLParams.from_dict({**PF_AMCL_DEFAULTS, **{k: v for k, v in pf.items() if k not in pf_names}})
+    pf_params(pf)
     return own, ekf, pf
 
 
@@ -274,9 +269,10 @@ class HybridLocalizer:
 
     def _search_step(self, obs: LandmarkObservation) -> None:
         pf, setup = self.pf, self._setup
-        prior_pose, prior_cov = propagate(pf.estimate(), pf.covariance, obs.odometry_v_mps,
-                                          obs.odometry_omega_rad_s, obs.odometry_dt_s,
-                                          setup.motion)
+        if obs.landmark_ids.size:  # the prediction the readings are gated on, before they count
+            prior_pose, prior_cov = propagate(pf.estimate(), pf.covariance, obs.odometry_v_mps,
+                                              obs.odometry_omega_rad_s, obs.odometry_dt_s,
+                                              setup.motion)
         updates = pf.updates
         pf.step(obs)
         if obs.landmark_ids.size:

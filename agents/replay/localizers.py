@@ -101,16 +101,22 @@ def _real(value, name: str, *, positive: bool = False, minimum: float | None = 0
     return number
 
 
-def params_from_dict(cls, config: Mapping, what: str):
-    """Build a parameter dataclass from a mapping; an unknown key names the closest valid one."""
-    if not isinstance(config, Mapping):
-        raise TypeError(f"{what} parameters must be a mapping, got {type(config).__name__}")
-    known = [f.name for f in fields(cls)]
+def reject_unknown_keys(config: Mapping, known, what: str) -> None:
+    """A ValueError for the first key of ``config`` not in ``known``, naming the closest valid
+    one."""
+    known = list(known)
     for key in config:
         if key not in known:
             close = difflib.get_close_matches(str(key), known, n=1, cutoff=0.5)
             hint = f"; did you mean {close[0]!r}?" if close else ""
             raise ValueError(f"{key}: unknown {what} parameter{hint}")
+
+
+def params_from_dict(cls, config: Mapping, what: str):
+    """Build a parameter dataclass from a mapping; an unknown key names the closest valid one."""
+    if not isinstance(config, Mapping):
+        raise TypeError(f"{what} parameters must be a mapping, got {type(config).__name__}")
+    reject_unknown_keys(config, [f.name for f in fields(cls)], what)
     return cls(**dict(config))
 
 

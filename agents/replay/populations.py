@@ -231,6 +231,16 @@ PF_AMCL_DEFAULTS = {"min_particles": 300, "max_particles": 2000, "bin_size_m": 0
                     "teammate_outlier_probability": 0.1, "recovery": False}
 
 
+def pf_params(params: Mapping):
+    """``(PfParams, AMCLParams)`` from one mapping: :class:`PfParams`' keys are the landmark
+    filter's own, every other key goes to the AMCL core (over :data:`PF_AMCL_DEFAULTS`)."""
+    from swarmloc.agents.laser.amcl import AMCLParams
+
+    own = {k: v for k, v in params.items() if k in {f.name for f in fields(PfParams)}}
+    amcl = {**PF_AMCL_DEFAULTS, **{k: v for k, v in params.items() if k not in own}}
+    return PfParams(**own), AMCLParams.from_dict(amcl)
+
+
 class ParticleFilterLocalizer:
     """The AMCL-style particle filter (``agents/laser/amcl.py``'s :class:`AugmentedMCL`) on landmark
     readings: each tick the particles move with the odometry (per-step noise: the motion model
@@ -243,12 +253,9 @@ class ParticleFilterLocalizer:
     ``resample_ess_fraction``. In between, the estimate follows the odometry."""
 
     def __init__(self, setup: LandmarkSetup, params: Mapping, rng: np.random.Generator):
-        from swarmloc.agents.laser.amcl import AMCLParams, AugmentedMCL
+        from swarmloc.agents.laser.amcl import AugmentedMCL
 
-        own = {k: v for k, v in params.items() if k in {f.name for f in fields(PfParams)}}
-        amcl = {**PF_AMCL_DEFAULTS, **{k: v for k, v in params.items() if k not in own}}
-        self.params = PfParams(**own)
-        self.amcl_params = AMCLParams.from_dict(amcl)
+        self.params, self.amcl_params = pf_params(params)
         self.setup = setup
         x0, y0, x1, y1 = setup.bounds_m
         self._log_uniform_xy = -math.log((x1 - x0) * (y1 - y0))
