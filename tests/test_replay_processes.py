@@ -27,7 +27,8 @@ DATASET = Path(__file__).resolve().parents[2] / "shared" / "data" / "mrclam" / "
 
 @pytest.mark.skipif(not DATASET.is_dir(), reason=f"MRCLAM Dataset 6 not found at {DATASET}")
 @pytest.mark.parametrize("algorithm, start, duration_s", [
-    ("ekf", "known", 10.0), ("pf", "known", 10.0), ("hybrid", "unknown", 30.0)])
+    ("ekf", "known", 10.0), ("pf", "known", 10.0), ("hybrid", "unknown", 30.0),
+    ("ssga", "known", 10.0)])
 def test_replay_over_processes_gives_the_in_process_estimates(tmp_path, algorithm, start,
                                                               duration_s):
     """The hybrid from an unknown start: the particle filter's search, the handover to the EKF

@@ -36,6 +36,11 @@ Algorithms (registry :data:`ALGORITHMS`, built by :func:`build_localizer`):
 - ``hybrid``: the particle filter searches, the EKF tracks once the particles agree with each
   other and with the readings, and the search starts again when the EKF counts itself lost
   (:mod:`swarmloc.agents.replay.hybrid`).
+- ``ssga``: MR-SSGA of seed 002 (the laser family's ``agents/laser/ssga.py``: population on a
+  small-world network, table 1's mating rules) with eq. 1 as the mean of CFS-GA's landmark
+  fitness terms over the readings of the last two seconds; cooperative: eq. 2, the teammates'
+  relative readings against their broadcast beliefs added to the fitness
+  (:mod:`swarmloc.agents.replay.ssga_landmarks`).
 
 Particle filter and GA run their measurement step (correction/generation) on the ticks that
 bring a landmark or teammate measurement and only move their hypotheses with the odometry in
@@ -48,8 +53,8 @@ measurement models, the teammate reports, dead reckoning and the registry.
 
 Every localizer starts from the known initial pose (the data sets' convention for tracking; the
 MRCLAM literature initialises from the first ground-truth pose) with ``initial_std``; or, for
-the population localizers (``pf``, ``cfsga``, and ``hybrid``, which searches with the ``pf``), from an
-unknown one: ``LandmarkSetup.initial_area_m``
+the population localizers (``pf``, ``cfsga``, ``ssga``, and ``hybrid``, which searches with the
+``pf``), from an unknown one: ``LandmarkSetup.initial_area_m``
 (uniform over that area and every heading, issue 19).
 
 Noise parameters. :class:`CameraNoise`'s defaults are the raw camera of
@@ -781,9 +786,9 @@ def register(algorithm: Algorithm) -> None:
 
 def build_localizer(name: str, setup: LandmarkSetup, rng: np.random.Generator,
                     params: Mapping | None = None) -> LandmarkLocalizer:
-    """The localizer of algorithm ``name`` (``dr``, ``ekf``, ``pf``, ``cfsga``, ``hybrid``) for one
-    robot;
-    ``params`` are the algorithm's parameters by name (unknown names are rejected)."""
+    """The localizer of algorithm ``name`` (``dr``, ``ekf``, ``pf``, ``cfsga``, ``hybrid``,
+    ``ssga``) for one robot; ``params`` are the algorithm's parameters by name (unknown names
+    are rejected)."""
     if name not in ALGORITHMS:
         close = difflib.get_close_matches(str(name), ALGORITHMS.names(), n=1, cutoff=0.3)
         hint = f"; did you mean {close[0]!r}?" if close else ""
@@ -830,3 +835,13 @@ def _build_hybrid(setup, rng, params):
 
 register(Algorithm("hybrid", "particle filter search, EKF tracking; cooperative: the active stage's",
                    _build_hybrid))
+
+
+def _build_ssga(setup, rng, params):
+    from swarmloc.agents.replay.ssga_landmarks import SsgaLocalizer
+
+    return SsgaLocalizer(setup, params, rng)
+
+
+register(Algorithm("ssga", "MR-SSGA (seed 002) on a small-world network; cooperative: teammates' "
+                   "readings in the fitness", _build_ssga))

@@ -11,6 +11,10 @@ landmark range-and-bearing readings (contract, noise, measurement models and tea
   (:func:`teammate_log_density`);
 - :class:`CfsgaLocalizer`: CFS-GA of ``agents/laser/cfsga.py`` (seed 003) with the landmark
   fitness; cooperative: 003 §IV-B's virtual population and virtual niches.
+
+:class:`ReadingWindow` (the landmark readings of the last seconds, brought to the present by the
+odometry) and :func:`median_pose` are shared with MR-SSGA
+(:mod:`swarmloc.agents.replay.ssga_landmarks`).
 """
 
 
@@ -401,6 +405,72 @@ class ParticleFilterLocalizer:
         return self.coop.out
 
 
+class ReadingWindow:
+    """The landmark readings of the last ``window_s`` seconds, for a raw fitness that covers them
+    all (CFS-GA's and MR-SSGA's, :func:`landmark_fitness_terms`): with each reading, the robot's
+    odometry pose (dead reckoning in its own frame) and the motion variances accumulated up to
+    it, so that a hypothesis of the present pose can be moved back to the time of each reading
+    and the reading's noise grown by the motion noise of that interval.
+
+    Each tick: :meth:`move` (the tick's odometry and its noise stds, the tick's end time; drops
+    the readings ``window_s`` or more seconds old), then :meth:`add` for the tick's readings of
+    known landmarks; :meth:`fitness_terms` gives the summed terms as a function of the poses."""
+
+    def __init__(self, window_s: float):
+        self.window_s = window_s
+        self.odometry_pose = np.zeros(3)
+        self.odometry_var = np.zeros(2)  # accumulated distance and turn variances
+        self.time_s = 0.0
+        #: (odometry pose, accumulated variances, landmarks xy (K, 2), ranges (K,),
+        #: bearings (K,), time) of each tick with readings in the window.
+        self.entries: list[tuple] = []
+
+    def move(self, distance_m: float, turn_rad: float, std_d: float, std_t: float,
+             time_s: float) -> None:
+        self.odometry_pose = unicycle(self.odometry_pose[None, :], distance_m, turn_rad)[0]
+        self.odometry_var = self.odometry_var + np.array([std_d * std_d, std_t * std_t])
+        self.time_s = time_s
+        horizon = self.time_s - self.window_s
+        self.entries = [e for e in self.entries if e[5] > horizon]
+
+    def add(self, landmarks_xy: np.ndarray, range_m: np.ndarray, bearing_rad: np.ndarray) -> None:
+        self.entries.append((self.odometry_pose.copy(), self.odometry_var.copy(), landmarks_xy,
+                             range_m, bearing_rad, self.time_s))
+
+    def fitness_terms(self, camera: CameraNoise):
+        """``(terms, K)``: ``terms(poses (P, 3)) -> (P,)`` the sum of the ``K`` readings' raw
+        fitness terms as a function of the present poses (None and 0 for an empty window)."""
+        entries = self.entries
+        if not entries:
+            return None, 0
+        odo = np.array([e[0] for e in entries])
+        var = np.array([e[1] for e in entries])
+        lm_xy = np.concatenate([e[2] for e in entries])
+        rng_m = np.concatenate([e[3] for e in entries])
+        bearing = np.concatenate([e[4] for e in entries])
+        counts = [e[2].shape[0] for e in entries]
+        delta = np.repeat(_between(self.odometry_pose, odo), counts, axis=0)
+        extra = np.repeat(self.odometry_var[None, :] - var, counts, axis=0)
+        range_std = np.sqrt(camera.range_std(rng_m) ** 2 + extra[:, 0])
+        bearing_std = np.sqrt(camera.bearing_std_rad**2 + extra[:, 1])
+
+        def terms(poses: np.ndarray) -> np.ndarray:
+            return landmark_fitness_terms(poses, delta, lm_xy, rng_m, bearing, range_std,
+                                          bearing_std)
+
+        return terms, rng_m.size
+
+
+def median_pose(population: np.ndarray, radius_m: float) -> np.ndarray:
+    """A population's coordinate-wise median position, with the circular mean heading of the
+    individuals within ``radius_m`` of it (of all of them when none is)."""
+    xy = np.median(population[:, :2], axis=0)
+    near = np.hypot(population[:, 0] - xy[0], population[:, 1] - xy[1]) < radius_m
+    headings = population[near, 2] if near.any() else population[:, 2]
+    heading = math.atan2(np.sin(headings).mean(), np.cos(headings).mean())
+    return np.array([xy[0], xy[1], heading])
+
+
 @dataclass(frozen=True)
 class CfsgaMrclamParams:
     """The landmark CFS-GA's own parameters; every other key goes to
@@ -484,12 +554,7 @@ class CfsgaLocalizer:
         self.coop = _Cooperation(setup)
         self.generations = 0
         self.virtual_size = 0
-        # The reading window: odometry pose (dead reckoning in its own frame) and time of each
-        # reading, with the landmark, range and bearing.
-        self._odometry_pose = np.zeros(3)
-        self._odometry_var = np.zeros(2)  # accumulated distance and turn variances
-        self._time_s = 0.0
-        self._window: list[tuple] = []
+        self.window = ReadingWindow(self.params.window_s)
 
     @property
     def rejected(self):
@@ -513,30 +578,6 @@ class CfsgaLocalizer:
             parts.append(np.column_stack([xy, np.full(xy.shape[0], heading)]))
         return np.concatenate(parts) if parts else None
 
-    def _window_fitness(self):
-        """``(raw fitness terms (P,) summed, number of terms)`` of the readings in the window,
-        as a function of the present poses."""
-        entries = self._window
-        if not entries:
-            return None, 0
-        odo = np.array([e[0] for e in entries])
-        var = np.array([e[1] for e in entries])
-        lm_xy = np.concatenate([e[2] for e in entries])
-        rng_m = np.concatenate([e[3] for e in entries])
-        bearing = np.concatenate([e[4] for e in entries])
-        counts = [e[2].shape[0] for e in entries]
-        delta = np.repeat(_between(self._odometry_pose, odo), counts, axis=0)
-        extra = np.repeat(self._odometry_var[None, :] - var, counts, axis=0)
-        camera = self.setup.camera
-        range_std = np.sqrt(camera.range_std(rng_m) ** 2 + extra[:, 0])
-        bearing_std = np.sqrt(camera.bearing_std_rad**2 + extra[:, 1])
-
-        def terms(poses: np.ndarray) -> np.ndarray:
-            return landmark_fitness_terms(poses, delta, lm_xy, rng_m, bearing, range_std,
-                                          bearing_std)
-
-        return terms, rng_m.size
-
     def step(self, obs: LandmarkObservation) -> None:
         setup = self.setup
         check_observation(obs, setup.robot_id)
@@ -549,21 +590,16 @@ class CfsgaLocalizer:
         if self._shared.shape[0]:
             self._shared = unicycle(self._shared, distance, turn)
         self._cov = self._cov + _motion_growth(std_d, std_t)
-        self._odometry_pose = unicycle(self._odometry_pose[None, :], distance, turn)[0]
-        self._odometry_var = self._odometry_var + np.array([std_d * std_d, std_t * std_t])
-        self._time_s = obs.time_s
-        horizon = self._time_s - self.params.window_s
-        self._window = [e for e in self._window if e[5] > horizon]
+        self.window.move(distance, turn, std_d, std_t, obs.time_s)
         readings = self.coop.readings(obs)
         xy, known = setup.landmark_positions(obs.landmark_ids)
         if known.any():
-            self._window.append((self._odometry_pose.copy(), self._odometry_var.copy(), xy[known],
-                                 obs.landmark_range_m[known], obs.landmark_bearing_rad[known],
-                                 self._time_s))
+            self.window.add(xy[known], obs.landmark_range_m[known],
+                            obs.landmark_bearing_rad[known])
         use_teammates = bool(readings) and self.params.teammate_fitness
         if known.any() or use_teammates:
             camera = setup.camera
-            window_terms, n_window = self._window_fitness()
+            window_terms, n_window = self.window.fitness_terms(camera)
             pose, cov = self._pose, self._cov
             n_terms = n_window + (len(readings) if use_teammates else 0)
 
@@ -593,13 +629,7 @@ class CfsgaLocalizer:
     def _population_estimate(self) -> np.ndarray:
         if self.params.estimate == "best":
             return self.ga.best_pose
-        population = self.ga.population
-        xy = np.median(population[:, :2], axis=0)
-        near = np.hypot(population[:, 0] - xy[0], population[:, 1] - xy[1]) \
-            < self.params.median_radius_m
-        headings = population[near, 2] if near.any() else population[:, 2]
-        heading = math.atan2(np.sin(headings).mean(), np.cos(headings).mean())
-        return np.array([xy[0], xy[1], heading])
+        return median_pose(self.ga.population, self.params.median_radius_m)
 
     def estimate(self) -> np.ndarray:
         return self._pose.copy()

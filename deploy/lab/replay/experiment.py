@@ -43,7 +43,7 @@ METRIC_COLUMNS = ("robot", "position_rmse_m", "heading_rmse_rad", "final_error_m
 _CONFIG_COLUMNS = ("dataset", "algorithm", "cooperative", "calibration", "start", "kidnap_s",
                    "dt_s")
 #: Relative CPU per tick of each localizer (the plan's progress weights; measured on Dataset 6).
-_COST = {"dr": 1, "ekf": 2, "pf": 6, "cfsga": 6, "hybrid": 4}
+_COST = {"dr": 1, "ekf": 2, "pf": 6, "cfsga": 6, "ssga": 5, "hybrid": 4}
 
 
 def load_replay_scenario(name_or_path: str, overrides: list[str] = ()):

@@ -54,13 +54,13 @@ from swarmloc.world.replay.replay import DEFAULT_DT_S, ReplayWorld
 #: Stream id separating the MRCLAM localizers' generators (``[seed, stream, robot_id]``).
 MRCLAM_STREAM = 7
 #: The report's line-up, in table order.
-REPORT_ALGORITHMS = ("dr", "ekf", "pf", "cfsga", "hybrid")
+REPORT_ALGORITHMS = ("dr", "ekf", "pf", "cfsga", "ssga", "hybrid")
 #: ``ReplayConfig.calibration``: self (no ground truth), the Vicon fit (reference), none.
 CALIBRATIONS = ("self", "vicon", "none")
 #: ``ReplayConfig.start``.
 STARTS = ("known", "unknown")
 #: The localizers that can start from an unknown pose (a population over the whole field).
-GLOBAL_ALGORITHMS = ("pf", "cfsga", "hybrid")
+GLOBAL_ALGORITHMS = ("pf", "cfsga", "ssga", "hybrid")
 #: A kidnap's jump told by the odometry: (distance m along the mid-turn heading, turn rad).
 KIDNAP_JUMP = (2.0, math.pi / 2)
 #: Error below which a robot counts as localized (issue 19: 0.3 m, and it must stay there).
@@ -419,7 +419,7 @@ def add_arguments(p) -> None:
                         "(default 120)")
     p.add_argument("--start", default="known",
                    help="known (the first Vicon pose; default) or unknown (uniform over the "
-                        "landmark field, every heading: pf, cfsga and hybrid only)")
+                        "landmark field, every heading: pf, cfsga, ssga and hybrid only)")
     p.add_argument("--kidnap-s", type=float, default=None,
                    help="teleport a robot's estimate this many seconds after the start")
     p.add_argument("--kidnap-robot", type=int, default=None,
