@@ -16,11 +16,18 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from mrclam_synthetic import SMALL, SYNTH_CAMERA, SYNTH_MOTION
+from mrclam_synthetic import (
+    DATASET6,
+    SMALL,
+    SYNTH_CAMERA,
+    SYNTH_MOTION,
+    empty_observation,
+    small_setup,
+    synthetic_dataset,
+)
 
 from swarmloc.agents.replay.ekf import EkfLocalizer, position_update, range_bearing_update
 from swarmloc.agents.replay.localizers import (
-    LandmarkSetup,
     TeammateReport,
     build_localizer,
     decode_report,
@@ -33,9 +40,8 @@ from swarmloc.world.replay.mrclam import (
     synthesize,
     write_dataset,
 )
-from swarmloc.world.replay.replay import LandmarkObservation, Message, ReplayWorld, mean_commands
+from swarmloc.world.replay.replay import Message, ReplayWorld, mean_commands
 
-DATASET6 = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "mrclam" / "MRCLAM_Dataset6"
 needs_dataset6 = pytest.mark.skipif(
     not (DATASET6 / "Barcodes.dat").is_file(),
     reason=f"MRCLAM Dataset 6 not found at {DATASET6} (see ../shared/data/mrclam/SOURCE.md)")
@@ -57,7 +63,7 @@ def dataset6():
 
 @pytest.fixture(scope="module")
 def synthetic():
-    return synthesize(SMALL, np.random.default_rng(11))
+    return synthetic_dataset()
 
 
 @pytest.fixture()
@@ -511,22 +517,6 @@ def test_every_algorithm_tracks_the_synthetic_run(synthetic):
 # --------------------------------------------------------------------------------------------
 
 
-def _setup(**kw):
-    return LandmarkSetup(robot_id=1, landmark_ids=np.array([6, 7]),
-                         landmark_xy_m=np.array([[2.0, 0.0], [0.0, 2.0]]),
-                         initial_pose=np.zeros(3), **kw)
-
-
-def _obs(**kw):
-    empty = np.zeros(0)
-    base = {"robot_id": 1, "tick": 0, "time_s": 0.02, "odometry_v_mps": 0.0,
-            "odometry_omega_rad_s": 0.0, "odometry_dt_s": 0.02,
-            "landmark_ids": np.zeros(0, np.int64), "landmark_range_m": empty,
-            "landmark_bearing_rad": empty, "robot_ids": np.zeros(0, np.int64),
-            "robot_range_m": empty, "robot_bearing_rad": empty}
-    return LandmarkObservation(**{**base, **kw})
-
-
 def test_report_round_trip():
     cov = np.array([[0.01, 0.002, 0.0], [0.002, 0.02, 0.001], [0.0, 0.001, 0.003]])
     report = TeammateReport(3, 17, np.array([1.0, -2.0, 0.5]), cov,
@@ -549,26 +539,26 @@ def test_decode_of_arbitrary_bytes_raises_only_value_error(data):
 
 
 def test_bad_payload_is_skipped_and_counted():
-    ekf = EkfLocalizer(_setup(cooperative=True))
-    ekf.step(_obs(received=(Message(2, b"\x01\x02"), Message(3, b"not msgpack \xc1"))))
+    ekf = EkfLocalizer(small_setup(cooperative=True))
+    ekf.step(empty_observation(received=(Message(2, b"\x01\x02"), Message(3, b"not msgpack \xc1"))))
     assert [sender for sender, _ in ekf.rejected] == [2, 3]
     assert np.allclose(ekf.estimate(), 0.0)
     assert ekf.outgoing() is not None
 
 
 def test_observation_for_another_robot_or_with_bad_values_is_rejected():
-    ekf = build_localizer("ekf", _setup(), np.random.default_rng(0))
+    ekf = build_localizer("ekf", small_setup(), np.random.default_rng(0))
     with pytest.raises(ValueError, match="robot_id"):
-        ekf.step(_obs(robot_id=2))
+        ekf.step(empty_observation(robot_id=2))
     with pytest.raises(ValueError, match="odometry_dt_s"):
-        ekf.step(_obs(odometry_dt_s=0.0))
+        ekf.step(empty_observation(odometry_dt_s=0.0))
     with pytest.raises(ValueError, match="landmark_range_m"):
-        ekf.step(_obs(landmark_ids=np.array([6]), landmark_range_m=np.array([-1.0]),
+        ekf.step(empty_observation(landmark_ids=np.array([6]), landmark_range_m=np.array([-1.0]),
                       landmark_bearing_rad=np.array([0.0])))
     with pytest.raises(ValueError, match="unknown 'ekff'.*did you mean 'ekf'"):
-        build_localizer("ekff", _setup(), np.random.default_rng(0))
+        build_localizer("ekff", small_setup(), np.random.default_rng(0))
     with pytest.raises(ValueError, match="gate_chi"):
-        build_localizer("ekf", _setup(), np.random.default_rng(0), {"gate_chi": 3.0})
+        build_localizer("ekf", small_setup(), np.random.default_rng(0), {"gate_chi": 3.0})
 
 
 def test_cli_runs_and_rejects_a_bad_folder(folder, tmp_path, capsys):

@@ -9,11 +9,17 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pytest
-from mrclam_synthetic import SMALL, SYNTH_CAMERA, SYNTH_MOTION
+from mrclam_synthetic import (
+    DATASET6,
+    SYNTH_CAMERA,
+    SYNTH_MOTION,
+    small_setup,
+    synthetic_config,
+    synthetic_dataset,
+)
 
 from swarmloc.agents.replay.calibration import SelfCalibratingLocalizer
 from swarmloc.agents.replay.hybrid import (
@@ -33,21 +39,17 @@ from swarmloc.deploy.lab.replay.mrclam import (
     run_replay,
     score,
 )
-from swarmloc.world.replay.mrclam import load_dataset, synthesize
+from swarmloc.world.replay.mrclam import load_dataset
 from swarmloc.world.replay.replay import LandmarkObservation
-
-DATASET6 = Path(__file__).resolve().parents[2] / "shared" / "data" / "mrclam" / "MRCLAM_Dataset6"
 
 
 @pytest.fixture(scope="module")
 def synthetic():
-    return synthesize(SMALL, np.random.default_rng(11))
+    return synthetic_dataset()
 
 
 def _config(**kw) -> ReplayConfig:
-    base = {"algorithm": "hybrid", "motion": SYNTH_MOTION, "camera": SYNTH_CAMERA,
-            "calibration": "none"}
-    return ReplayConfig(**{**base, **kw})
+    return synthetic_config(**{"algorithm": "hybrid", **kw})
 
 
 def _drive(data, config):
@@ -191,14 +193,8 @@ def test_same_seed_same_estimates(synthetic, seed):
 # --------------------------------------------------------------------------------------------
 
 
-def _setup(**kw):
-    return LandmarkSetup(robot_id=1, landmark_ids=np.array([6, 7]),
-                         landmark_xy_m=np.array([[2.0, 0.0], [0.0, 2.0]]),
-                         initial_pose=np.zeros(3), **kw)
-
-
 def test_parameters_go_to_their_stage():
-    hybrid = build_localizer("hybrid", _setup(initial_area_m=(0.0, 0.0, 2.0, 2.0)),
+    hybrid = build_localizer("hybrid", small_setup(initial_area_m=(0.0, 0.0, 2.0, 2.0)),
                              np.random.default_rng(0),
                              {"gate_chi2": 5.0, "min_particles": 100, "handover_updates": 3})
     assert hybrid.phase == SEARCH
@@ -219,7 +215,7 @@ def test_parameters_go_to_their_stage():
 ])
 def test_bad_parameters_are_named(params, message):
     with pytest.raises(ValueError, match=message):
-        build_localizer("hybrid", _setup(), np.random.default_rng(0), params)
+        build_localizer("hybrid", small_setup(), np.random.default_rng(0), params)
 
 
 def test_the_tracking_stage_doubts_ranges_until_the_camera_is_calibrated():
@@ -227,16 +223,16 @@ def test_the_tracking_stage_doubts_ranges_until_the_camera_is_calibrated():
     ``uncalibrated_range_fraction`` of the range; once the self-calibration hands a corrected
     camera over (or the camera came corrected), the camera's own noise."""
     camera = CameraNoise(range_fraction=0.04)
-    hybrid = build_localizer("hybrid", _setup(camera=camera), np.random.default_rng(0), {})
+    hybrid = build_localizer("hybrid", small_setup(camera=camera), np.random.default_rng(0), {})
     assert hybrid.phase == TRACK and hybrid.params.uncalibrated_range_fraction == 0.08
     assert hybrid.ekf.setup.camera.range_fraction == 0.08
     assert hybrid.setup.camera.range_fraction == 0.04  # the search's camera is untouched
     corrected = replace(camera, range_bias_c0=0.03, range_fraction=0.03)
     hybrid.setup = replace(hybrid.setup, camera=corrected)
     assert hybrid.ekf.setup.camera == corrected
-    biased = build_localizer("hybrid", _setup(camera=corrected), np.random.default_rng(0), {})
+    biased = build_localizer("hybrid", small_setup(camera=corrected), np.random.default_rng(0), {})
     assert biased.ekf.setup.camera == corrected
-    off = build_localizer("hybrid", _setup(camera=camera), np.random.default_rng(0),
+    off = build_localizer("hybrid", small_setup(camera=camera), np.random.default_rng(0),
                           {"uncalibrated_range_fraction": 0.0})
     assert off.ekf.setup.camera == camera
 
@@ -249,20 +245,20 @@ def test_a_bad_observation_is_named_in_either_stage():
         landmark_bearing_rad=empty, robot_ids=np.zeros(0, np.int64), robot_range_m=empty,
         robot_bearing_rad=empty)
     for area in (None, (0.0, 0.0, 2.0, 2.0)):
-        hybrid = build_localizer("hybrid", _setup(initial_area_m=area), np.random.default_rng(0), {})
+        hybrid = build_localizer("hybrid", small_setup(initial_area_m=area), np.random.default_rng(0), {})
         with pytest.raises(ValueError, match="obs.odometry_v_mps must be finite"):
             hybrid.step(bad)
 
 
 def test_search_area_is_the_start_area_or_the_landmarks_box():
-    assert search_area(_setup()) == (0.0, 0.0, 2.0, 2.0)
-    assert search_area(_setup(initial_area_m=(-1.0, -1.0, 3.0, 4.0))) == (-1.0, -1.0, 3.0, 4.0)
+    assert search_area(small_setup()) == (0.0, 0.0, 2.0, 2.0)
+    assert search_area(small_setup(initial_area_m=(-1.0, -1.0, 3.0, 4.0))) == (-1.0, -1.0, 3.0, 4.0)
 
 
 def test_self_calibration_reaches_both_stages():
     """The self-calibrating wrapper replaces the localizer's setup (its camera); the hybrid
     hands the camera to the stage that runs, and keeps each stage's own start."""
-    hybrid = build_localizer("hybrid", _setup(initial_area_m=(0.0, 0.0, 2.0, 2.0)),
+    hybrid = build_localizer("hybrid", small_setup(initial_area_m=(0.0, 0.0, 2.0, 2.0)),
                              np.random.default_rng(0), {})
     wrapped = SelfCalibratingLocalizer(hybrid)
     camera = replace(hybrid.setup.camera, range_bias_c0=0.03)

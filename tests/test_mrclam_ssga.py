@@ -9,18 +9,22 @@ when the data set is absent.
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
-from mrclam_synthetic import SMALL, SYNTH_CAMERA, SYNTH_MOTION
+from mrclam_synthetic import (
+    DATASET6,
+    empty_observation,
+    small_setup,
+    synthetic_config,
+    synthetic_dataset,
+)
 
 from swarmloc.agents.laser.ssga import SSGAParams
 from swarmloc.agents.replay import populations
 from swarmloc.agents.replay.localizers import (
     ALGORITHMS,
     CameraNoise,
-    LandmarkSetup,
     build_localizer,
 )
 from swarmloc.agents.replay.populations import ReadingWindow
@@ -32,21 +36,16 @@ from swarmloc.deploy.lab.replay.mrclam import (
     run_replay,
     score,
 )
-from swarmloc.world.replay.mrclam import load_dataset, synthesize
-from swarmloc.world.replay.replay import LandmarkObservation
-
-DATASET6 = Path(__file__).resolve().parents[2] / "shared" / "data" / "mrclam" / "MRCLAM_Dataset6"
+from swarmloc.world.replay.mrclam import load_dataset
 
 
 @pytest.fixture(scope="module")
 def synthetic():
-    return synthesize(SMALL, np.random.default_rng(11))
+    return synthetic_dataset()
 
 
 def _config(**kw) -> ReplayConfig:
-    base = {"algorithm": "ssga", "motion": SYNTH_MOTION, "camera": SYNTH_CAMERA,
-            "calibration": "none"}
-    return ReplayConfig(**{**base, **kw})
+    return synthetic_config(**{"algorithm": "ssga", **kw})
 
 
 # --------------------------------------------------------------------------------------------
@@ -119,14 +118,8 @@ def test_eq2_teammate_terms_are_what_cooperation_changes(synthetic):
 # --------------------------------------------------------------------------------------------
 
 
-def _setup(**kw):
-    return LandmarkSetup(robot_id=1, landmark_ids=np.array([6, 7]),
-                         landmark_xy_m=np.array([[2.0, 0.0], [0.0, 2.0]]),
-                         initial_pose=np.zeros(3), **kw)
-
-
 def test_parameters_go_to_their_place_and_the_network_is_the_laser_modules():
-    ssga = build_localizer("ssga", _setup(initial_area_m=(0.0, 0.0, 2.0, 2.0)),
+    ssga = build_localizer("ssga", small_setup(initial_area_m=(0.0, 0.0, 2.0, 2.0)),
                            np.random.default_rng(0),
                            {"population_size": 50, "ws_neighbours": 6, "window_s": 3.0})
     assert isinstance(ssga, SsgaLocalizer) and isinstance(ssga.ga_params, SSGAParams)
@@ -135,9 +128,9 @@ def test_parameters_go_to_their_place_and_the_network_is_the_laser_modules():
     assert ssga.population.shape == (50, 3)
     assert ssga.edges.shape == (50 * 6 // 2, 2)  # Watts-Strogatz keeps N k / 2 links
     assert (ssga.population[:, :2] >= 0.0).all() and (ssga.population[:, :2] <= 2.0).all()
-    default = build_localizer("ssga", _setup(), np.random.default_rng(0), {})
+    default = build_localizer("ssga", small_setup(), np.random.default_rng(0), {})
     assert default.ga_params.population_size == SSGA_MRCLAM_DEFAULTS["population_size"]
-    ba = build_localizer("ssga", _setup(), np.random.default_rng(0),
+    ba = build_localizer("ssga", small_setup(), np.random.default_rng(0),
                          {"network": "barabasi_albert", "population_size": 30, "ba_edges": 2})
     assert ba.edges.shape == ((30 - 2) * 2, 2)
 
@@ -191,17 +184,7 @@ def test_reading_window_by_hand():
 ])
 def test_bad_parameters_are_named(params, error, message):
     with pytest.raises(error, match=message):
-        build_localizer("ssga", _setup(), np.random.default_rng(0), params)
-
-
-def _obs(**kw) -> LandmarkObservation:
-    empty = np.zeros(0)
-    base = {"robot_id": 1, "tick": 0, "time_s": 0.02, "odometry_v_mps": 0.0,
-            "odometry_omega_rad_s": 0.0, "odometry_dt_s": 0.02,
-            "landmark_ids": np.zeros(0, np.int64), "landmark_range_m": empty,
-            "landmark_bearing_rad": empty, "robot_ids": np.zeros(0, np.int64),
-            "robot_range_m": empty, "robot_bearing_rad": empty}
-    return LandmarkObservation(**{**base, **kw})
+        build_localizer("ssga", small_setup(), np.random.default_rng(0), params)
 
 
 @pytest.mark.parametrize("bad, message", [
@@ -213,11 +196,11 @@ def _obs(**kw) -> LandmarkObservation:
       "landmark_bearing_rad": np.array([0.0])}, "obs.landmark_range_m/bearing_rad"),
 ])
 def test_a_bad_observation_is_rejected(bad, message):
-    ssga = build_localizer("ssga", _setup(initial_area_m=(0.0, 0.0, 2.0, 2.0)),
+    ssga = build_localizer("ssga", small_setup(initial_area_m=(0.0, 0.0, 2.0, 2.0)),
                            np.random.default_rng(0), {})
     before = ssga.population.copy()
     with pytest.raises(ValueError, match=message):
-        ssga.step(_obs(**bad))
+        ssga.step(empty_observation(**bad))
     np.testing.assert_array_equal(ssga.population, before)  # nothing moved
 
 

@@ -348,12 +348,11 @@ class ParticleFilterLocalizer:
         obs = calibrated(obs, setup.camera)
         dt = obs.odometry_dt_s
         core = self._core(dt)
-        distance, turn = obs.odometry_v_mps * dt, obs.odometry_omega_rad_s * dt
+        distance, turn, std_d, std_t = tick_motion(obs, setup.motion)
         core.predict(distance, turn)
         if self._buffer is not None:
             self._buffer.move(distance, turn, dt)
         self._pose = unicycle(self._pose[None, :], distance, turn)[0]
-        std_d, std_t = setup.motion.tick_std(obs.odometry_v_mps, obs.odometry_omega_rad_s, dt)
         self._cov = self._cov + _motion_growth(std_d, std_t)
         readings = self.coop.readings(obs)
         xy, known = setup.landmark_positions(obs.landmark_ids)
@@ -403,6 +402,14 @@ class ParticleFilterLocalizer:
 
     def outgoing(self) -> bytes | None:
         return self.coop.out
+
+
+def tick_motion(obs: LandmarkObservation, motion) -> tuple[float, float, float, float]:
+    """The tick's odometry increments and their noise: ``(distance [m], turn [rad], std of the
+    distance, std of the turn)`` (:meth:`MotionNoise.tick_std`)."""
+    dt = obs.odometry_dt_s
+    std_d, std_t = motion.tick_std(obs.odometry_v_mps, obs.odometry_omega_rad_s, dt)
+    return obs.odometry_v_mps * dt, obs.odometry_omega_rad_s * dt, std_d, std_t
 
 
 class ReadingWindow:
@@ -582,9 +589,7 @@ class CfsgaLocalizer:
         setup = self.setup
         check_observation(obs, setup.robot_id)
         obs = calibrated(obs, setup.camera)
-        dt = obs.odometry_dt_s
-        distance, turn = obs.odometry_v_mps * dt, obs.odometry_omega_rad_s * dt
-        std_d, std_t = setup.motion.tick_std(obs.odometry_v_mps, obs.odometry_omega_rad_s, dt)
+        distance, turn, std_d, std_t = tick_motion(obs, setup.motion)
         diffusion = 1.0 if self.ga_params.motion_diffusion else 0.0
         self.ga.kinematic_update(distance, turn, std_d * diffusion, std_t * diffusion)
         if self._shared.shape[0]:

@@ -145,6 +145,7 @@ from swarmloc.agents.replay.populations import (
     _weighted_pose_covariance,
     median_pose,
     teammate_log_density,
+    tick_motion,
 )
 from swarmloc.world.replay.replay import LandmarkObservation
 
@@ -262,9 +263,7 @@ class SsgaLocalizer:
         setup = self.setup
         check_observation(obs, setup.robot_id)
         obs = calibrated(obs, setup.camera)
-        dt = obs.odometry_dt_s
-        distance, turn = obs.odometry_v_mps * dt, obs.odometry_omega_rad_s * dt
-        std_d, std_t = setup.motion.tick_std(obs.odometry_v_mps, obs.odometry_omega_rad_s, dt)
+        distance, turn, std_d, std_t = tick_motion(obs, setup.motion)
         self._kinematic_update(distance, turn, std_d, std_t)
         self._cov = self._cov + _motion_growth(std_d, std_t)
         self.window.move(distance, turn, std_d, std_t, obs.time_s)
