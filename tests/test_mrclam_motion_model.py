@@ -1,16 +1,23 @@
-"""The EKF's motion model options for MRCLAM's velocity commands (issue 19): the command classes
-of the odometry self-calibration, the command lag, the offset only while moving, and the
-motion bound that fits the class model against Vicon (``deploy/lab/replay/motion_bound.py``)."""
+"""The EKF's options for MRCLAM's velocity commands and overconfident teammates (issue 19): the
+command classes of the odometry self-calibration, the command lag, the offset only while
+moving, the teammate's position std floor, and the motion bound that fits the class model
+against Vicon (``deploy/lab/replay/motion_bound.py``)."""
 
 import math
 
 import numpy as np
 import pytest
+from mrclam_synthetic import empty_observation, small_setup
 
 from swarmloc.agents.replay.ekf import EkfLocalizer, EkfParams, command_class, propagate_calibrated
-from swarmloc.agents.replay.localizers import CameraNoise, LandmarkSetup, MotionNoise
+from swarmloc.agents.replay.localizers import (
+    CameraNoise,
+    LandmarkSetup,
+    MotionNoise,
+    TeammateReport,
+)
 from swarmloc.world.replay.mrclam import Measurements, RobotRecord
-from tests.mrclam_synthetic import empty_observation
+from swarmloc.world.replay.replay import Message
 
 DRIFT = np.array([1e-3, 1e-3, 1e-4])
 
@@ -134,7 +141,31 @@ def test_class_calibration_learns_that_the_robot_slows_in_turns():
     assert 0.75 < k_v < 0.97
 
 
+def _fused_with(report_cov, **params):
+    """Robot 1 (at the origin, std 0.05 m) after teammate 2, at (1, 0) facing back, reports
+    seeing it 0.9 m ahead: a position fix at (0.1, 0)."""
+    ekf = EkfLocalizer(small_setup(cooperative=True), EkfParams(**params))
+    report = TeammateReport(2, 0, np.array([1.0, 0.0, math.pi]), report_cov,
+                            np.array([[1.0, 0.9, 0.0]]), np.zeros((0, 3)))
+    ekf.step(empty_observation(received=(Message(2, report.encode()),)))
+    assert ekf.teammate_updates == 1
+    return ekf.estimate()
+
+
+def test_teammate_floor_adds_its_variance_to_the_teammates_position():
+    """A floor ``f`` fuses as a report whose x and y variances are ``f^2 / inflation`` larger;
+    a floored teammate pulls the robot less than half as far as a confident one."""
+    tiny = np.diag([1e-8, 1e-8, 1e-8])
+    bare = _fused_with(tiny)
+    floored = _fused_with(tiny, teammate_floor_std_m=0.1)
+    as_report = _fused_with(tiny + np.diag([0.01 / 2.0, 0.01 / 2.0, 0.0]))
+    np.testing.assert_allclose(floored, as_report, atol=1e-12)
+    assert bare[0] > 0.04 and 0.0 < floored[0] < 0.5 * bare[0]
+
+
 def test_motion_options_reject_bad_values_by_name():
+    with pytest.raises(ValueError, match="teammate_floor_std_m"):
+        EkfParams(teammate_floor_std_m=-0.1)
     with pytest.raises(ValueError, match="odometry_lag_s"):
         EkfParams(odometry_lag_s=-0.1)
     with pytest.raises(TypeError, match="odometry_turn_class_rad_s"):
