@@ -100,7 +100,9 @@ def _collapsed(wrong: bool, params=None):
     explains A's reading exactly and B's not at all (the particle filter's robust likelihood
     takes B's readings for misreads). The search's recovery is off, so that the set stays where
     it is and only the handover rule is tested (with it on, a B reading makes the filter inject
-    particles from B's circle and the set finds the truth within a few ticks). Returns the phase and the estimate's error after each of 300 ticks."""
+    particles from B's circle and the set finds the truth within a few ticks). Returns the phase,
+    the estimate's error and the EKF's teammate floor (NaN while searching) after each of 300
+    ticks."""
     landmarks = np.array([[2.0, 0.0], [0.0, 2.0]])
     setup = LandmarkSetup(robot_id=1, landmark_ids=np.array([6, 7]), landmark_xy_m=landmarks,
                           initial_pose=np.zeros(3), camera=SYNTH_CAMERA, motion=SYNTH_MOTION,
@@ -112,7 +114,7 @@ def _collapsed(wrong: bool, params=None):
                         initial_pose=start)
     hybrid.pf = ParticleFilterLocalizer(collapsed, hybrid.pf_params, np.random.default_rng(1))
     rng = np.random.default_rng(2)
-    phases, errors = [], []
+    phases, errors, floors = [], [], []
     for k in range(300):
         d = landmarks[k % 2]
         obs = LandmarkObservation(
@@ -125,13 +127,14 @@ def _collapsed(wrong: bool, params=None):
         hybrid.step(obs)
         phases.append(hybrid.phase)
         errors.append(float(np.hypot(*hybrid.estimate()[:2])))
-    return np.array([p == TRACK for p in phases]), np.array(errors)
+        floors.append(math.nan if hybrid.ekf is None else hybrid.ekf.params.teammate_floor_std_m)
+    return np.array([p == TRACK for p in phases]), np.array(errors), np.array(floors)
 
 
 @pytest.mark.parametrize("params", [{}, {"odometry_calibration": True}])
 def test_a_set_collapsed_on_the_truth_is_handed_over(params):
     """... also to an EKF that carries more state than the pose (the odometry calibration)."""
-    tracking, errors = _collapsed(wrong=False, params=params)
+    tracking, errors, _ = _collapsed(wrong=False, params=params)
     first = int(np.argmax(tracking))
     assert tracking[first] and first < 40  # 10 tight updates and a full window of 20 readings
     assert tracking[first:].all() and errors[first:].max() < 0.1
@@ -140,11 +143,24 @@ def test_a_set_collapsed_on_the_truth_is_handed_over(params):
 def test_a_set_collapsed_on_a_wrong_pose_is_not_handed_over():
     """The wrong set is tight, but half the readings fall outside the gate of its estimate: it
     is not handed over. Without the consistency test (any share of outliers accepted) it is."""
-    tracking, errors = _collapsed(wrong=True)
+    tracking, errors, _ = _collapsed(wrong=True)
     assert errors.min() > 2.0  # the set stays wrong
     assert not tracking.any()
-    tracking, errors = _collapsed(wrong=True, params={"handover_outlier_fraction": 1.0})
+    tracking, errors, _ = _collapsed(wrong=True, params={"handover_outlier_fraction": 1.0})
     assert (tracking & (errors > 0.3)).any()
+
+
+def test_teammates_are_floored_for_fresh_s_after_a_handover_then_not():
+    """``fresh_s`` 2 s, floor 0.15 m: the EKF fuses its teammates with the floor on the 100
+    ticks of 0.02 s it tracks after the handover, then with its own ``teammate_floor_std_m``
+    (0.03)."""
+    tracking, _, floors = _collapsed(wrong=False, params={
+        "fresh_s": 2.0, "fresh_teammate_floor_std_m": 0.15, "teammate_floor_std_m": 0.03})
+    first = int(np.argmax(tracking))
+    assert tracking[first] and first < 100
+    assert np.isnan(floors[:first]).all()
+    np.testing.assert_array_equal(floors[first:first + 101], 0.15)  # the handover's tick too
+    np.testing.assert_array_equal(floors[first + 101:], 0.03)
 
 
 def test_known_start_is_the_ekf_until_lost(synthetic):
@@ -212,6 +228,8 @@ def test_parameters_go_to_their_stage():
     ({"consistency_window": 0}, "consistency_window must be an integer >= 1"),
     ({"handover_position_std_m": -1.0}, "handover_position_std_m must be >= 0"),
     ({"uncalibrated_range_fraction": 2.0}, "uncalibrated_range_fraction must lie in"),
+    ({"fresh_s": -1.0}, "fresh_s must be >= 0"),
+    ({"fresh_teammate_floor_std_m": math.inf}, "fresh_teammate_floor_std_m must be finite"),
 ])
 def test_bad_parameters_are_named(params, message):
     with pytest.raises(ValueError, match=message):
