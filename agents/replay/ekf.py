@@ -44,8 +44,9 @@ State: the pose ``(x_m, y_m, theta_rad)`` and its covariance ``P`` (3 x 3).
   holds one ``(k_v, k_w, b_w)`` per command class (:func:`command_class`: turning slower than
   the threshold, left, right), each with the prior and random walk above; with
   ``odometry_lag_s`` a command moves the robot that long after it is given. Measured with the
-  hybrid, cooperative, Dataset 6 (known start, position RMSE robots 1-5; unknown start, 20
-  seeds, 180 s: robot-seeds under 0.3 m within 60 s and staying, and seeds with every robot):
+  hybrid, cooperative, Dataset 6, before its teammate floor after a handover (known start,
+  position RMSE robots 1-5; unknown start, seeds 0-19, 180 s: robot-seeds under 0.3 m within
+  60 s and staying, and seeds with every robot):
   its default 0.075 / 0.087 / 0.099 / 0.110 / 0.079 m, 94/100, 14/20; lag 0.2 s 0.072 / 0.083 /
   0.085 / 0.116 / 0.079, 89, 14; lag and a speed scale per class (prior stds ``(0.2, 0, 0)``,
   threshold 0.1 rad/s) 0.070 / 0.077 / 0.069 / 0.134 / 0.071, 90, 13; lag and the whole set
@@ -72,10 +73,12 @@ State: the pose ``(x_m, y_m, theta_rad)`` and its covariance ``P`` (3 x 3).
   filter has 2; seed 6 unknown start: 6-73), most of all just after a handover, and a teammate
   0.15 m off with a 0.02 m std drags this robot along (robot 2, seed 6, 23-70 s: teammates 4
   and 5). A scale does not reach such stds (inflation 3: 93 robot-seeds of 100, unknown start);
-  a floor does: with the hybrid, cooperative, 0.05 / 0.1 / 0.15 / 0.2 m give 94 / 95 / 95 / 95
+  a floor does: with the hybrid, cooperative (before its own floor after a handover,
+  :mod:`swarmloc.agents.replay.hybrid`), 0.05 / 0.1 / 0.15 / 0.2 m give 94 / 95 / 95 / 95
   robot-seeds and every robot in 15 / 17 / 16 / 17 of 20 seeds (default: 94, 14), but from the
   known start robot 4 rises from 0.110 to 0.130 / 0.139 m (0.05 / 0.1 m) and the RMSE after
-  localizing grows (robot 2 0.119 -> 0.128 m at 0.1 m): not made default. With ``fusion="sgikf"`` the reading becomes a position fix
+  localizing grows (robot 2 0.119 -> 0.128 m at 0.1 m): not made default. With
+  ``fusion="sgikf"`` the reading becomes a position fix
   fused by social odometry's SGIKF (seed 000 eq. 18-22,
   :func:`~swarmloc.agents.replay.localizers.sgikf_fuse`).
 
