@@ -66,9 +66,9 @@ def test_list_shows_every_shipped_spec_of_every_family(capsys):
     assert set(listed) == set(shipped_specs())
     assert {f for f, _ in listed.values()} == {"epuck", "laser", "vision", "replay"}
     assert listed["vision"] == ("vision", 3 * 2 * 30 + 3 * 10 + 10)
-    # global: 4 algorithms x alone/coop x 20 seeds; deterministic: 3 x 2; kidnap: 4 x 2 x 3
+    # global: 4 algorithms x alone/coop x 40 seeds; deterministic: 3 x 2; kidnap: 4 x 2 x 3
     # seeds; stochastic: 3 x 2 x 3 seeds; reference: 2 x 2 x 2 calibrations.
-    assert listed["mrclam6"] == ("replay", 4 * 2 * 20 + 3 * 2 + 4 * 2 * 3 + 3 * 2 * 3
+    assert listed["mrclam6"] == ("replay", 4 * 2 * 40 + 3 * 2 + 4 * 2 * 3 + 3 * 2 * 3
                                  + 2 * 2 * 2)
     assert cli_main(["experiment", "--list"]) == 0
     out = capsys.readouterr().out

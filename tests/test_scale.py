@@ -151,11 +151,12 @@ if os.fork():
         os._exit(0)          # the parent dies before its child asks for a signal
     time.sleep(60)           # killed by the test once the child has asked
     os._exit(0)
-with open(out + ".pid", "w") as f:
+with open(out + ".pid", "w") as f:  # read only after the answer, which is renamed into place
     f.write(str(os.getpid()))
 def on_term(signum, frame):
-    with open(out + ".term", "w") as f:
+    with open(out + ".term.tmp", "w") as f:  # whole or not at all: the test reads it at once
         f.write("SIGTERM")
+    os.rename(out + ".term.tmp", out + ".term")
     os._exit(0)
 signal.signal(signal.SIGTERM, on_term)
 while late and os.getppid() == parent:
