@@ -113,13 +113,15 @@ def _child(args, robot: int, log_dir: Path | None, server_pid: int) -> int:
         os.dup2(fd, 1)
         os.dup2(fd, 2)
         os.close(fd)
+    # Our own stop first: until then a SIGTERM runs the handler inherited from the server, which
+    # would swallow the kernel's signal of the server's death (CI saw an agent outlive it).
+    stop = _install_stop()
     if not die_with_parent(signal.SIGTERM, parent_pid=server_pid):
         # The server died between our fork and this call (a launcher that kills it as soon as
         # the last agent is announced can do that): no SIGTERM will ever come, so end now.
         print(f"swarmloc agent {robot}: the agent server (pid {server_pid}) is gone; not starting",
               file=sys.stderr)
         return 1
-    stop = _install_stop()
     agent_args = argparse.Namespace(**{**vars(args), "robot": robot})
     return serve_agent(agent_args, stop)
 
