@@ -9,8 +9,17 @@ install's entries and compiles, once, under the cache's lock (a few milliseconds
 
 from __future__ import annotations
 
+import pytest
+from mrclam_synthetic import synthetic_dataset
+
 from swarmloc.deploy.warm import ensure_compiled
 
 
 def pytest_sessionstart(session) -> None:
     ensure_compiled(lambda line: print(line, flush=True))
+
+
+@pytest.fixture(scope="module")
+def synthetic():
+    """The MRCLAM test modules' small synthetic data set (``mrclam_synthetic``), once per module."""
+    return synthetic_dataset()

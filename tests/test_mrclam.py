@@ -23,7 +23,6 @@ from mrclam_synthetic import (
     SYNTH_MOTION,
     empty_observation,
     small_setup,
-    synthetic_dataset,
 )
 
 from swarmloc.agents.replay.ekf import EkfLocalizer, position_update, range_bearing_update
@@ -59,11 +58,6 @@ def dataset6():
     return load_dataset(DATASET6)
 
 
-
-
-@pytest.fixture(scope="module")
-def synthetic():
-    return synthetic_dataset()
 
 
 @pytest.fixture()

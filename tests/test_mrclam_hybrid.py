@@ -18,7 +18,6 @@ from mrclam_synthetic import (
     SYNTH_MOTION,
     small_setup,
     synthetic_config,
-    synthetic_dataset,
 )
 
 from swarmloc.agents.replay.calibration import SelfCalibratingLocalizer
@@ -41,11 +40,6 @@ from swarmloc.deploy.lab.replay.mrclam import (
 )
 from swarmloc.world.replay.mrclam import load_dataset
 from swarmloc.world.replay.replay import LandmarkObservation
-
-
-@pytest.fixture(scope="module")
-def synthetic():
-    return synthetic_dataset()
 
 
 def _config(**kw) -> ReplayConfig:

@@ -178,11 +178,6 @@ def test_localized_from_by_hand():
 # --------------------------------------------------------------------------------------------
 
 
-@pytest.fixture(scope="module")
-def synthetic():
-    return synthesize(SMALL, np.random.default_rng(11))
-
-
 def test_sensor_resetting_poses_explain_the_reading():
     """Every pose drawn from a reading (landmark at (3, 1), range 2, bearing 0.3) sees the
     landmark at that range and bearing, up to the camera's noise (4 std)."""

@@ -17,7 +17,6 @@ from mrclam_synthetic import (
     empty_observation,
     small_setup,
     synthetic_config,
-    synthetic_dataset,
 )
 
 from swarmloc.agents.laser.ssga import SSGAParams
@@ -37,11 +36,6 @@ from swarmloc.deploy.lab.replay.mrclam import (
     score,
 )
 from swarmloc.world.replay.mrclam import load_dataset
-
-
-@pytest.fixture(scope="module")
-def synthetic():
-    return synthetic_dataset()
 
 
 def _config(**kw) -> ReplayConfig:

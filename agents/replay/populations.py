@@ -444,6 +444,17 @@ class ReadingWindow:
         self.entries.append((self.odometry_pose.copy(), self.odometry_var.copy(), landmarks_xy,
                              range_m, bearing_rad, self.time_s))
 
+    def record(self, obs: LandmarkObservation, setup: LandmarkSetup, distance_m: float,
+               turn_rad: float, std_d: float, std_t: float) -> bool:
+        """One tick: :meth:`move` by the tick's motion, then :meth:`add` the tick's readings of
+        known landmarks (``obs`` already calibrated); True if there were any."""
+        self.move(distance_m, turn_rad, std_d, std_t, obs.time_s)
+        xy, known = setup.landmark_positions(obs.landmark_ids)
+        if not known.any():
+            return False
+        self.add(xy[known], obs.landmark_range_m[known], obs.landmark_bearing_rad[known])
+        return True
+
     def fitness_terms(self, camera: CameraNoise):
         """``(terms, K)``: ``terms(poses (P, 3)) -> (P,)`` the sum of the ``K`` readings' raw
         fitness terms as a function of the present poses (None and 0 for an empty window)."""
@@ -595,14 +606,10 @@ class CfsgaLocalizer:
         if self._shared.shape[0]:
             self._shared = unicycle(self._shared, distance, turn)
         self._cov = self._cov + _motion_growth(std_d, std_t)
-        self.window.move(distance, turn, std_d, std_t, obs.time_s)
+        seen = self.window.record(obs, setup, distance, turn, std_d, std_t)
         readings = self.coop.readings(obs)
-        xy, known = setup.landmark_positions(obs.landmark_ids)
-        if known.any():
-            self.window.add(xy[known], obs.landmark_range_m[known],
-                            obs.landmark_bearing_rad[known])
         use_teammates = bool(readings) and self.params.teammate_fitness
-        if known.any() or use_teammates:
+        if seen or use_teammates:
             camera = setup.camera
             window_terms, n_window = self.window.fitness_terms(camera)
             pose, cov = self._pose, self._cov

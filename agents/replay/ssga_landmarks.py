@@ -266,14 +266,10 @@ class SsgaLocalizer:
         distance, turn, std_d, std_t = tick_motion(obs, setup.motion)
         self._kinematic_update(distance, turn, std_d, std_t)
         self._cov = self._cov + _motion_growth(std_d, std_t)
-        self.window.move(distance, turn, std_d, std_t, obs.time_s)
+        seen = self.window.record(obs, setup, distance, turn, std_d, std_t)
         readings = self.coop.readings(obs)
-        xy, known = setup.landmark_positions(obs.landmark_ids)
-        if known.any():
-            self.window.add(xy[known], obs.landmark_range_m[known],
-                            obs.landmark_bearing_rad[known])
         teammates = readings if self.params.teammate_fitness else []
-        if known.any() or teammates:
+        if seen or teammates:
             self._generation(teammates)
         else:
             self._pose = unicycle(self._pose[None, :], distance, turn)[0]
