@@ -16,11 +16,12 @@ from mrclam_synthetic import (
     DATASET6,
     SYNTH_CAMERA,
     SYNTH_MOTION,
+    empty_observation,
     small_setup,
     synthetic_config,
 )
 
-from swarmloc.agents.replay.calibration import SelfCalibratingLocalizer
+from swarmloc.agents.replay.calibration import SelfCalibratingLocalizer, SelfCalibrationParams
 from swarmloc.agents.replay.hybrid import (
     HYBRID_EKF_DEFAULTS,
     SEARCH,
@@ -223,6 +224,7 @@ def test_parameters_go_to_their_stage():
     ({"handover_position_std_m": -1.0}, "handover_position_std_m must be >= 0"),
     ({"uncalibrated_range_fraction": 2.0}, "uncalibrated_range_fraction must lie in"),
     ({"fresh_s": -1.0}, "fresh_s must be >= 0"),
+    ({"uncalibrated_folds": 0}, "uncalibrated_folds must be an integer >= 1"),
     ({"fresh_teammate_floor_std_m": math.inf}, "fresh_teammate_floor_std_m must be finite"),
 ])
 def test_bad_parameters_are_named(params, message):
@@ -247,6 +249,38 @@ def test_the_tracking_stage_doubts_ranges_until_the_camera_is_calibrated():
     off = build_localizer("hybrid", small_setup(camera=camera), np.random.default_rng(0),
                           {"uncalibrated_range_fraction": 0.0})
     assert off.ekf.setup.camera == camera
+
+
+def test_a_self_calibration_counts_as_corrected_from_its_second_fold():
+    """The EKF stage keeps doubting the ranges (``uncalibrated_range_fraction``) after the
+    self-calibration's first fold and takes its camera from the second (``uncalibrated_folds``
+    2): readings of landmarks at bearings within +-0.4 rad, 3 m away, with a range bias
+    ``-0.45 b^2``, the robot standing at the truth, a fold every 100 readings."""
+    bearings = np.linspace(-0.4, 0.4, 9)
+    ids = np.arange(10, 19)
+    setup = LandmarkSetup(robot_id=1, landmark_ids=ids,
+                          landmark_xy_m=3.0 * np.column_stack([np.cos(bearings), np.sin(bearings)]),
+                          initial_pose=np.zeros(3), camera=CameraNoise(range_fraction=0.04))
+    hybrid = build_localizer("hybrid", setup, np.random.default_rng(0), {})
+    assert hybrid.params.uncalibrated_folds == 2
+    wrapper = SelfCalibratingLocalizer(hybrid, SelfCalibrationParams(trust_window=5))
+    seen = {}
+    for k in range(400):
+        j = k % 9
+        wrapper.step(empty_observation(
+            tick=k, time_s=0.02 * (k + 1), landmark_ids=ids[j:j + 1],
+            landmark_range_m=np.array([3.0 * (1.0 - 0.45 * bearings[j] ** 2)]),
+            landmark_bearing_rad=bearings[j:j + 1]))
+        assert hybrid.calibration_folds == wrapper.landmarks.refreshes
+        seen.setdefault(hybrid.calibration_folds, hybrid.ekf.setup.camera)
+    assert set(seen) >= {0, 1, 2}
+    assert seen[0].range_fraction == seen[1].range_fraction == 0.08
+    assert seen[1].range_bias_c2 < -0.1  # corrected, yet still doubted
+    assert seen[2].range_fraction < 0.08 and seen[2].range_bias_c2 < -0.1  # the camera's own
+    # Without a self-calibration (a camera that came corrected) the count stays 0: no doubt.
+    corrected = replace(setup.camera, range_bias_c2=-0.45)
+    fitted = build_localizer("hybrid", replace(setup, camera=corrected), np.random.default_rng(0), {})
+    assert fitted.calibration_folds == 0 and fitted.ekf.setup.camera == corrected
 
 
 def test_a_bad_observation_is_named_in_either_stage():
