@@ -48,3 +48,27 @@ def empty_observation(**kw) -> LandmarkObservation:
             "landmark_bearing_rad": empty, "robot_ids": np.zeros(0, np.int64),
             "robot_range_m": empty, "robot_bearing_rad": empty}
     return LandmarkObservation(**{**base, **kw})
+
+
+#: A fan of nine landmarks 3 m from the origin at bearings within +-0.4 rad: a robot standing
+#: at the origin facing +x sees them all, and a range bias ``c0 + c2 b^2`` shows at once.
+FAN_RANGE_M = 3.0
+FAN_BEARINGS_RAD = np.linspace(-0.4, 0.4, 9)
+FAN_IDS = np.arange(10, 19)
+
+
+def fan_setup(camera: CameraNoise) -> LandmarkSetup:
+    """Robot 1 at the origin facing +x, the fan's landmarks around it."""
+    xy = FAN_RANGE_M * np.column_stack([np.cos(FAN_BEARINGS_RAD), np.sin(FAN_BEARINGS_RAD)])
+    return LandmarkSetup(robot_id=1, landmark_ids=FAN_IDS, landmark_xy_m=xy,
+                         initial_pose=np.zeros(3), camera=camera)
+
+
+def fan_reading(tick: int, c2: float) -> LandmarkObservation:
+    """Tick ``tick`` standing at the origin: one reading of fan landmark ``tick mod 9``, its
+    range biased by ``(1 + c2 b^2)``, its bearing exact."""
+    j = tick % FAN_IDS.size
+    bearing = FAN_BEARINGS_RAD[j:j + 1]
+    return empty_observation(tick=tick, time_s=0.02 * (tick + 1), landmark_ids=FAN_IDS[j:j + 1],
+                             landmark_range_m=FAN_RANGE_M * (1.0 + c2 * bearing**2),
+                             landmark_bearing_rad=bearing)

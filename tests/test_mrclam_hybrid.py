@@ -16,7 +16,8 @@ from mrclam_synthetic import (
     DATASET6,
     SYNTH_CAMERA,
     SYNTH_MOTION,
-    empty_observation,
+    fan_reading,
+    fan_setup,
     small_setup,
     synthetic_config,
 )
@@ -256,21 +257,13 @@ def test_a_self_calibration_counts_as_corrected_from_its_second_fold():
     self-calibration's first fold and takes its camera from the second (``uncalibrated_folds``
     2): readings of landmarks at bearings within +-0.4 rad, 3 m away, with a range bias
     ``-0.45 b^2``, the robot standing at the truth, a fold every 100 readings."""
-    bearings = np.linspace(-0.4, 0.4, 9)
-    ids = np.arange(10, 19)
-    setup = LandmarkSetup(robot_id=1, landmark_ids=ids,
-                          landmark_xy_m=3.0 * np.column_stack([np.cos(bearings), np.sin(bearings)]),
-                          initial_pose=np.zeros(3), camera=CameraNoise(range_fraction=0.04))
+    setup = fan_setup(CameraNoise(range_fraction=0.04))
     hybrid = build_localizer("hybrid", setup, np.random.default_rng(0), {})
     assert hybrid.params.uncalibrated_folds == 2
     wrapper = SelfCalibratingLocalizer(hybrid, SelfCalibrationParams(trust_window=5))
     seen = {}
     for k in range(400):
-        j = k % 9
-        wrapper.step(empty_observation(
-            tick=k, time_s=0.02 * (k + 1), landmark_ids=ids[j:j + 1],
-            landmark_range_m=np.array([3.0 * (1.0 - 0.45 * bearings[j] ** 2)]),
-            landmark_bearing_rad=bearings[j:j + 1]))
+        wrapper.step(fan_reading(k, c2=-0.45))
         assert hybrid.calibration_folds == wrapper.landmarks.refreshes
         seen.setdefault(hybrid.calibration_folds, hybrid.ekf.setup.camera)
     assert set(seen) >= {0, 1, 2}

@@ -13,7 +13,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from mrclam_synthetic import SMALL, SYNTH_CAMERA, SYNTH_MOTION
+from mrclam_synthetic import SMALL, SYNTH_CAMERA, SYNTH_MOTION, fan_reading, fan_setup
 
 from swarmloc.agents.replay.calibration import (
     RangeBiasEstimator,
@@ -152,11 +152,7 @@ def test_an_implausible_fold_is_refused_and_counted_not_raised():
     ``c2 = -1.5``, seen only at bearings within +-0.4 rad): the fold is refused (``refused``
     counts it), the calibration stays unbiased and the localizer keeps its camera, where a
     CameraNoise with that bias is refused."""
-    bearings = np.linspace(-0.4, 0.4, 9)
-    xy = 3.0 * np.column_stack([np.cos(bearings), np.sin(bearings)])
-    ids = np.arange(10, 19)
-    setup = LandmarkSetup(robot_id=1, landmark_ids=ids, landmark_xy_m=xy,
-                          initial_pose=np.zeros(3), camera=SYNTH_CAMERA)
+    setup = fan_setup(SYNTH_CAMERA)
     with pytest.raises(ValueError, match="below 0.2"):
         CameraNoise(range_bias_c2=-1.5)
 
@@ -173,17 +169,11 @@ def test_an_implausible_fold_is_refused_and_counted_not_raised():
         def outgoing(self):
             return None
 
-    from swarmloc.world.replay.replay import LandmarkObservation
-
     inner = AtTruth()
     wrapper = SelfCalibratingLocalizer(inner, SelfCalibrationParams(
         trust_window=5, refresh_readings=300, prior_readings=1.0))
     for k in range(700):
-        j = k % 9
-        measured = 3.0 * (1.0 - 1.5 * bearings[j] ** 2)
-        wrapper.step(LandmarkObservation(1, k, 0.02 * k, 0.0, 0.0, 0.02, ids[j:j + 1],
-                                         np.array([measured]), bearings[j:j + 1],
-                                         np.zeros(0, int), np.zeros(0), np.zeros(0)))
+        wrapper.step(fan_reading(k, c2=-1.5))
     assert wrapper.refused >= 2  # the 300 readings after the trust window, twice
     assert (wrapper.landmarks.c0, wrapper.landmarks.c2) == (0.0, 0.0)
     assert wrapper.landmarks.refreshes == 0
