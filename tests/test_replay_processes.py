@@ -32,9 +32,9 @@ DATASET = Path(__file__).resolve().parents[2] / "shared" / "data" / "mrclam" / "
 def test_replay_over_processes_gives_the_in_process_estimates(tmp_path, algorithm, start,
                                                               duration_s):
     """The hybrid from an unknown start: the particle filter's search, the handover to the EKF
-    and the cooperation of both stages, over processes (seed 3: robots 1, 2 and 5 of Dataset 6
-    are under 0.3 m for good by 38 s)."""
-    scenario = load_any("mrclam6-ekf-coop", {"seed": 3, "algorithm": algorithm},
+    and the cooperation of both stages, over processes (seed 1: in-process, the five robots of
+    Dataset 6 are under 0.3 m for good by 15, 18, 16, 25 and 30 s)."""
+    scenario = load_any("mrclam6-ekf-coop", {"seed": 1, "algorithm": algorithm},
                         [f"dataset={json.dumps(str(DATASET))}", f"duration_s={duration_s}",
                          f"start={json.dumps(start)}"])
     path = tmp_path / "scenario.json"
@@ -58,4 +58,4 @@ def test_replay_over_processes_gives_the_in_process_estimates(tmp_path, algorith
     if start == "known":
         assert all(figures["position_rmse_m"] < 0.3 for figures in local.values())
     else:
-        assert sum(figures["localized_s"] < duration_s for figures in local.values()) >= 3
+        assert sum(figures["localized_s"] < duration_s for figures in local.values()) >= 4

@@ -8,7 +8,8 @@ landmark range-and-bearing readings (contract, noise, measurement models and tea
   (:class:`~swarmloc.agents.laser.amcl.AugmentedMCL`: KLD sampling, recovery) with the landmark
   log-likelihood plugged in; cooperative: each particle is reweighted by the density of the
   teammate's broadcast belief at the place the particle and the relative measurement put it
-  (:func:`teammate_log_density`);
+  (:func:`teammate_log_density`), and optionally, where that belief contradicts the set, part
+  of the set is drawn from it (``teammate_reset_fraction``, :func:`poses_from_teammate_reading`);
 - :class:`CfsgaLocalizer`: CFS-GA of ``agents/laser/cfsga.py`` (seed 003) with the landmark
   fitness; cooperative: 003 §IV-B's virtual population and virtual niches.
 
@@ -45,6 +46,7 @@ from swarmloc.agents.replay.localizers import (
     polar_covariance,
     position_fix,
     relative_readings,
+    spectral_norm_xy,
     unicycle,
     wrap_angle,
 )
@@ -174,6 +176,20 @@ class PfParams:
     #: landmarks and odometry-carried readings throw a tracked estimate off).
     fix_mixing: float = 0.0
     fix_disagreement_m: float = 0.5
+    #: Teammate resetting (the AMCL core's ``teammate_reset_fraction`` > 0; off by default, on
+    #: in the hybrid's search, :data:`~swarmloc.agents.replay.hybrid.HYBRID_PF_DEFAULTS`): when
+    #: a teammate's reading contradicts the set (see :meth:`ParticleFilterLocalizer._disagrees`)
+    #: that fraction of the particles is drawn from the teammate
+    #: (:func:`poses_from_teammate_reading`), but only from a teammate whose reported position
+    #: std (the square root of the largest eigenvalue of its position covariance) is under
+    #: ``teammate_reset_std_m`` [m]: a teammate still searching can report a set collapsed onto
+    #: a wrong pose, and a robot drawn from it follows it there.
+    teammate_reset_std_m: float = 0.15
+    #: The position std [m] this filter reports to its teammates is at least this (0: the
+    #: particles' own). A set that has collapsed reports a spread far under its error, and a
+    #: set drawn from a teammate's reading reports that teammate's own estimate back to it: the
+    #: teammate, fusing it as independent evidence, counts its own estimate twice.
+    report_floor_std_m: float = 0.0
 
     def __post_init__(self):
         if not 0.0 < _real(self.resample_ess_fraction, "resample_ess_fraction") <= 1.0:
@@ -187,6 +203,8 @@ class PfParams:
         if not isinstance(self.fix_proposal, bool):
             raise TypeError(f"fix_proposal must be true or false, got {self.fix_proposal!r}")
         _real(self.fix_window_s, "fix_window_s", positive=True)
+        _real(self.teammate_reset_std_m, "teammate_reset_std_m", positive=True)
+        _real(self.report_floor_std_m, "report_floor_std_m")
 
 
 def sensor_resetting_poses(n: int, rng: np.random.Generator, landmarks_xy: np.ndarray,
@@ -211,6 +229,58 @@ def sensor_resetting_poses(n: int, rng: np.random.Generator, landmarks_xy: np.nd
             out[outside] = _reading_poses(int(outside.sum()), rng, landmarks_xy, range_m,
                                           bearing_rad, camera)
     return out
+
+
+def poses_from_teammate_reading(n: int, rng: np.random.Generator, reading: RelativeReading,
+                                robot_id: int, obs: LandmarkObservation,
+                                camera: CameraNoise) -> np.ndarray:
+    """``(n, 3)`` poses of this robot drawn from a teammate's broadcast belief (a Gaussian: its
+    report's pose and covariance) through the readings between the two (sensor resetting with
+    the teammate as the landmark; the laser family's :func:`~swarmloc.agents.laser.amcl_belief.
+    poses_from_teammate` for range-and-bearing readings, which carry no relative heading). The
+    teammate's pose ``s`` is drawn from its belief, each reading from the camera's noise:
+
+    - the teammate measured this robot at ``(r', b')`` (its report's ``seen``): the robot stands at
+      ``s_xy + r' (cos, sin)(theta_s + b')``; its heading, when this robot measured the teammate
+      too at ``(r, b)``, is the direction to the teammate minus ``b``, otherwise uniform;
+    - only this robot measured the teammate, at ``(r, b)``: a circle around the teammate, the
+      direction ``phi`` from the robot to it uniform, the robot at ``s_xy - r (cos, sin)(phi)``
+      with heading ``phi - b`` (as for a landmark, :func:`sensor_resetting_poses`).
+
+    Draws: ``rng.normal`` of shape ``(n, 3)`` (the teammate), then of ``(n, 2)`` per reading
+    used, then one ``rng.uniform`` of ``n`` where a heading or a direction is unknown."""
+    rep = reading.report
+    cov = rep.covariance + np.eye(3) * 1e-12
+    teammate = rep.pose + rng.normal(size=(n, 3)) @ np.linalg.cholesky(cov).T
+    seen = rep.seen[rep.seen[:, 0] == robot_id] if rep.seen.size else rep.seen
+    own = np.flatnonzero(obs.robot_ids == reading.teammate_id)
+    out = np.empty((n, 3))
+    if seen.shape[0]:
+        r_seen, b_seen = _noisy_reading(n, rng, float(seen[0, 1]), float(seen[0, 2]), camera)
+        direction = teammate[:, 2] + b_seen
+        out[:, 0] = teammate[:, 0] + r_seen * np.cos(direction)
+        out[:, 1] = teammate[:, 1] + r_seen * np.sin(direction)
+        if own.size:
+            _, b_own = _noisy_reading(n, rng, float(obs.robot_range_m[own[0]]),
+                                      float(obs.robot_bearing_rad[own[0]]), camera)
+            out[:, 2] = np.arctan2(teammate[:, 1] - out[:, 1], teammate[:, 0] - out[:, 0]) - b_own
+        else:
+            out[:, 2] = rng.uniform(-math.pi, math.pi, size=n)
+    else:
+        r_own, b_own = _noisy_reading(n, rng, reading.range_m, reading.bearing_rad, camera)
+        phi = rng.uniform(-math.pi, math.pi, size=n)
+        out[:, 0] = teammate[:, 0] - r_own * np.cos(phi)
+        out[:, 1] = teammate[:, 1] - r_own * np.sin(phi)
+        out[:, 2] = phi - b_own
+    out[:, 2] = wrap_angle(out[:, 2])
+    return out
+
+
+def _noisy_reading(n: int, rng: np.random.Generator, range_m: float, bearing_rad: float,
+                   camera: CameraNoise) -> tuple[np.ndarray, np.ndarray]:
+    noise = rng.normal(size=(n, 2))
+    return (np.maximum(range_m + noise[:, 0] * float(camera.range_std(range_m)), 0.0),
+            bearing_rad + noise[:, 1] * camera.bearing_std_rad)
 
 
 def _reading_poses(n, rng, landmarks_xy, range_m, bearing_rad, camera) -> np.ndarray:
@@ -293,10 +363,35 @@ class ParticleFilterLocalizer:
         #: many particles were replaced so far.
         self.fit = 1.0 if setup.initial_area_m is None else 0.0
         self.resets = 0
+        #: Teammate resetting (see :meth:`_disagrees`): readings that contradicted the set, and
+        #: particles replaced by poses drawn from the teammate.
+        self.teammate_disagreements = 0
+        self.teammate_resets = 0
         #: The readings of the last ``fix_window_s`` (only with ``fix_proposal``, its one user:
         #: carrying them through every tick's motion is a Python loop on the hot path).
         self._buffer = ReadingBuffer(self.params.fix_window_s) if self.params.fix_proposal else None
         self._rng = rng  # the core's generator too: one stream per robot
+
+    def _disagrees(self, core, reading: RelativeReading, log_density: np.ndarray) -> bool:
+        """Teammate resetting (``teammate_reset_fraction`` > 0, the laser family's rule,
+        :class:`~swarmloc.agents.laser.amcl.AugmentedMCL`): the teammate is sure of itself
+        (``teammate_reset_std_m``) and the weighted mean of its density over the particles is
+        below a uniform belief's over the area, so reweighting could not move the set. Unlike
+        the laser family, which resets after resampling, the particles are drawn before the
+        reading reweights the set, so the reading weighs them at once: a robot seeing no
+        landmark has no other evidence to weigh them by (robot 4 of Dataset 6, unknown start,
+        seed 3: no landmark from 30 to 65 s, while from 41 to 62 s localized teammates measured
+        it, or it them, 2 to 5 times a second; its particles stayed 1.9 m off)."""
+        if self.amcl_params.teammate_reset_fraction <= 0.0 or spectral_norm_xy(
+                reading.report.covariance) >= self.params.teammate_reset_std_m ** 2:
+            return False
+        weights = core.weights
+        peak = float(log_density.max())
+        agreement = peak + math.log(max(float(weights @ np.exp(log_density - peak)), 1e-300))
+        if agreement >= self._log_uniform_xy:
+            return False
+        self.teammate_disagreements += 1
+        return True
 
     def _mix_fix(self, core) -> None:
         """Mixture MCL's fixed share of particles from the fix, when it disagrees with the
@@ -384,9 +479,17 @@ class ParticleFilterLocalizer:
                     self.resets += core.replace_random(n_reset, lambda n, g: self._reset_poses(
                         n, g, lm_xy, rng_m, bearing))
             for reading in readings:
-                core.reweight(_mixture(
-                    teammate_log_density(core.particles, reading, self._pose, self._cov, camera),
-                    self.amcl_params.teammate_outlier_probability, self._log_uniform_xy))
+                log_density = teammate_log_density(core.particles, reading, self._pose,
+                                                   self._cov, camera)
+                if self._disagrees(core, reading, log_density):
+                    self.teammate_resets += core.replace_random(
+                        round(self.amcl_params.teammate_reset_fraction * core.n_particles),
+                        lambda n, g, reading=reading: poses_from_teammate_reading(
+                            n, g, reading, setup.robot_id, obs, camera))
+                    log_density = teammate_log_density(core.particles, reading, self._pose,
+                                                       self._cov, camera)
+                core.reweight(_mixture(log_density, self.amcl_params.teammate_outlier_probability,
+                                       self._log_uniform_xy))
             estimate, _ = core.estimate_with_share()
             self._pose = estimate
             weights = core.weights
@@ -395,7 +498,12 @@ class ParticleFilterLocalizer:
             if ess < self.params.resample_ess_fraction * core.n_particles:
                 core.resample()
             self.updates += 1
-        self.coop.publish(obs, self._pose, self._cov)
+        cov = self._cov
+        floor = self.params.report_floor_std_m
+        if floor > 0.0 and (cov[0, 0] < floor * floor or cov[1, 1] < floor * floor):
+            cov = cov.copy()
+            cov[0, 0], cov[1, 1] = max(cov[0, 0], floor * floor), max(cov[1, 1], floor * floor)
+        self.coop.publish(obs, self._pose, cov)
 
     def estimate(self) -> np.ndarray:
         return self._pose.copy()
