@@ -50,8 +50,10 @@ def _scenario_args(p: argparse.ArgumentParser, positional: bool = True) -> None:
     g.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="any scenario value, e.g. --set world.medium.range_m=0.25 (repeatable)")
     g.add_argument("--variant", default=None, metavar="NAME",
-                   help="a named set of overrides, applied before --set: v0-defaults (e-puck: "
-                        "the defaults before issue 18's readings of the seeds)")
+                   help="a named set of overrides, applied before --set (e-puck): v0-defaults "
+                        "(the defaults before issue 18's readings of the seeds), v1-defaults "
+                        "(issue 18's first readings), top-speed (cruise at the e-puck's 1,000 "
+                        "steps/s)")
 
 
 def load_from_args(args, any_family: bool = False):

@@ -243,6 +243,21 @@ def test_defaults_are_the_seeds_readings_and_the_variants_the_old_ones(name):
     assert _issue_18_values(load_scenario(name, variant_overrides("v1-defaults"))) == V1_VALUES
 
 
+@pytest.mark.parametrize("variant, cruise_steps_s", [(None, 800.0), ("top-speed", 1000.0)])
+def test_the_sikfs_odometry_constant_follows_the_cruise_speed(variant, cruise_steps_s):
+    """``agent.odometry_k_m`` is the variance per metre that the world's slip gives at cruise
+    speed: U(-s, s) per wheel and sub-step has variance s^2 / 3 on a sub-step's travel d, and a
+    metre holds 1 / d sub-steps, so k = s^2 d / 3. The top-speed variant moves both (3 digits)."""
+    s = load_scenario("ES1", variant_overrides(variant))
+    world = s.world
+    assert s.agent.cruise_speed_steps_s == cruise_steps_s
+    substep_m = cruise_steps_s * world.body.metres_per_step * world.tick_s / world.odometry.substeps
+    expected = world.odometry.slip_fraction ** 2 * substep_m / 3.0
+    assert s.agent.odometry_k_m == pytest.approx(expected, rel=5e-3)
+    # Only the speed and its constant: every reading of the seeds stays today's.
+    assert _issue_18_values(s) == {**READING_VALUES, "odometry_k_m": s.agent.odometry_k_m}
+
+
 def test_cli_variant_is_applied_before_set_and_an_unknown_one_is_refused(capsys, no_run):
     from swarmloc.deploy import cli
 

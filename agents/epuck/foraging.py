@@ -102,6 +102,17 @@ class AgentConfig:
     #: is the SI unit of the distance ``p`` is (eq. 23). Neither unit reproduces the paper's
     #: peak (worse on both sides of 1e-2): small betas, a plain average, are as good as any here.
     confidence_unit_m: float = 1.0
+    #: Wheel speed while driving to a goal or wandering. Seed 000 §2 gives only the top speed
+    #: ("The maximum speed of the wheels is about 1,000 steps/s"), not the foraging one; ours is
+    #: 800. Measured (docs/so-000-speed/, 10 replications, today's other defaults; 800 / 1,000):
+    #: SSGIKF round trips ES1 124 / 147, ES2 898.5 / 1,083.5, ES3 660 / 794.5 (seed 000 §6.1.2:
+    #: about 150, 1,400, 2,000), NC 58.5 / 72.5 in ES1, robots on the path with communication
+    #: ES1 41-48 / 37-40 %, ES2 49-54 / 46-50 %, ES3 38-40 / 34-36 % (seed 000 §6.1.3: 50-70 %).
+    #: The top speed meets ES2's retrieval within 1.5x and ES1's about 150, but fewer robots are
+    #: on the path everywhere (a faster robot drifts farther per metre: the slip is drawn per
+    #: sub-step on the commanded travel) and the SGIKF / NC ratio does not move; neither speed
+    #: is the text's, so the default stays 800 and the top speed is the named variant
+    #: ``top-speed`` (``swarmloc.deploy.scenario.VARIANTS``).
     cruise_speed_steps_s: float = 800.0
     turn_speed_steps_s: float = 500.0
     #: Proportional steering: wheel speed difference per radian of heading error.
