@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 
+import msgpack
 import numpy as np
 import pytest
 from mrclam_synthetic import SMALL, SYNTH_CAMERA, SYNTH_MOTION, fan_reading, fan_setup
@@ -20,7 +21,12 @@ from swarmloc.agents.replay.calibration import (
     SelfCalibratingLocalizer,
     SelfCalibrationParams,
 )
-from swarmloc.agents.replay.localizers import CameraNoise, LandmarkSetup
+from swarmloc.agents.replay.localizers import (
+    CameraNoise,
+    LandmarkSetup,
+    TeammateReport,
+    decode_report,
+)
 from swarmloc.agents.replay.populations import sensor_resetting_poses
 from swarmloc.deploy.lab.replay.mrclam import (
     KIDNAP_JUMP,
@@ -36,6 +42,7 @@ from swarmloc.world.replay.mrclam import (
     synthesize,
     write_dataset,
 )
+from swarmloc.world.replay.replay import Message
 
 C0, C2 = 0.04, -0.45  # Dataset 6's order of magnitude (fit_camera: c0 0.025-0.052, c2 about -0.47)
 
@@ -178,6 +185,90 @@ def test_an_implausible_fold_is_refused_and_counted_not_raised():
     assert (wrapper.landmarks.c0, wrapper.landmarks.c2) == (0.0, 0.0)
     assert wrapper.landmarks.refreshes == 0
     assert inner.setup.camera == SYNTH_CAMERA
+
+
+class _AtTruth:
+    """A localizer standing at the origin, where the fan's readings put it; it reports its
+    pose as the localizers do."""
+
+    def __init__(self, setup):
+        self.setup = setup
+        self._out = None
+
+    def step(self, obs):
+        self._out = TeammateReport.build(self.setup.robot_id, obs.tick, np.zeros(3),
+                                         np.eye(3) * 1e-4, obs).encode()
+
+    def estimate(self):
+        return np.zeros(3)
+
+    def outgoing(self):
+        return self._out
+
+
+def _teammate_payload(bias, sender=2):
+    return TeammateReport(sender, 0, np.array([1.0, 1.0, 0.0]), np.eye(3) * 1e-4,
+                          np.zeros((0, 3)), np.zeros((0, 3)), bias).encode()
+
+
+def test_an_uncalibrated_camera_starts_from_a_teammates_calibration():
+    """Cooperative: a robot whose camera has not folded yet takes the calibration a teammate
+    broadcasts (the one that folded most often), corrects its readings by it at once, and does
+    not pass it on as its own; with ``from_teammates`` off, or once its own camera has folded,
+    a broadcast changes nothing."""
+    setup = replace(fan_setup(SYNTH_CAMERA), cooperative=True)
+    received = (Message(2, _teammate_payload((C0, C2, 3))),
+                Message(3, _teammate_payload((0.01, -0.1, 1), sender=3)))
+    inner = _AtTruth(setup)
+    wrapper = SelfCalibratingLocalizer(inner)
+    wrapper.step(replace(fan_reading(0, c2=0.0), received=received))
+    assert wrapper.adopted_from == 2
+    assert (inner.setup.camera.range_bias_c0, inner.setup.camera.range_bias_c2) == (C0, C2)
+    assert inner.setup.camera.corrected_range(np.array([1.0 + C0]), np.array([0.0]))[0] == \
+        pytest.approx(1.0)
+    assert wrapper.landmarks.refreshes == 0
+    assert decode_report(wrapper.outgoing()).camera_bias is None  # adopted: not passed on
+
+    alone = _AtTruth(setup)
+    SelfCalibratingLocalizer(alone, SelfCalibrationParams(from_teammates=False)).step(
+        replace(fan_reading(0, c2=0.0), received=received))
+    assert alone.setup.camera == SYNTH_CAMERA
+
+    own = _AtTruth(setup)  # folds its own camera first (true c2 -0.3), then hears a teammate
+    wrapper = SelfCalibratingLocalizer(own, SelfCalibrationParams(trust_window=5,
+                                                                  refresh_readings=100))
+    k = 0
+    while wrapper.landmarks.refreshes == 0:
+        wrapper.step(fan_reading(k, c2=-0.3))
+        k += 1
+    own_camera = own.setup.camera
+    wrapper.step(replace(fan_reading(k, c2=-0.3), received=received))
+    assert wrapper.adopted_from is None and own.setup.camera == own_camera
+    c0, c2, folds = decode_report(wrapper.outgoing()).camera_bias  # its own: passed on
+    assert (c0, c2, folds) == (wrapper.landmarks.c0, wrapper.landmarks.c2, 1)
+    assert c2 < -0.1  # towards the true -0.3
+
+
+@pytest.mark.parametrize("raw, message", [
+    (np.array([0.04, -0.45], "<f8").tobytes(), "3 float64"),
+    (np.array([np.nan, -0.45, 1.0], "<f8").tobytes(), "finite"),
+    (np.array([0.04, -0.95, 1.0], "<f8").tobytes(), "implausible"),
+    (np.array([0.04, -0.45, 0.0], "<f8").tobytes(), "folds"),
+    (np.array([0.04, -0.45, 1.5], "<f8").tobytes(), "folds"),
+    ("0.04", "expected bytes"),
+])
+def test_a_bad_camera_field_is_named(raw, message):
+    wire = msgpack.unpackb(_teammate_payload((C0, C2, 1)), raw=False)
+    assert decode_report(msgpack.packb(wire, use_bin_type=True)).camera_bias == (C0, C2, 1)
+    wire["camera"] = raw
+    with pytest.raises(ValueError, match=f"payload.camera: .*{message}"):
+        decode_report(msgpack.packb(wire, use_bin_type=True))
+    # A long-running robot counts it and goes on (its localizer's decode), and adopts nothing.
+    inner = _AtTruth(replace(fan_setup(SYNTH_CAMERA), cooperative=True))
+    wrapper = SelfCalibratingLocalizer(inner)
+    wrapper.step(replace(fan_reading(0, c2=0.0),
+                         received=(Message(2, msgpack.packb(wire, use_bin_type=True)),)))
+    assert wrapper.adopted_from is None and inner.setup.camera == SYNTH_CAMERA
 
 
 def test_self_calibration_needs_an_unbiased_start():

@@ -110,7 +110,9 @@ from swarmloc.world.replay.replay import LandmarkObservation
 #: under 0.15 m, at 0.3 m: 199/200, 39/40, 40/39/40/40/40**. Seeds 40-79, never run before
 #: the choice: neither 181/200, 28/40, 36/31/39/37/38; **these defaults 195/200, 35/40,
 #: 40/35/40/40/40** (robot 2's misses are its 46 s without a landmark from 25 s: 0.3 m crossed
-#: just before it sees one again at 71 s).
+#: just before it sees one again at 71 s). With the team's camera calibration since (stop 33,
+#: :mod:`swarmloc.agents.replay.calibration`: a camera not yet calibrated starts from a
+#: teammate's), seeds 0-39 198/200, 38/40; 40-79 199/200, 39/40; 80-119 195/200, 36/40.
 HYBRID_PF_DEFAULTS = {"recovery": True, "teammate_reset_fraction": 0.1, "report_floor_std_m": 0.3}
 #: The tracking stage's EKF: the odometry's speed scale estimated in the state (the EKF's
 #: ``odometry_calibration``, prior std 0.1: MRCLAM's robots drive about 0.9 of the commanded
@@ -171,7 +173,8 @@ class HybridParams:
     #: 90; the same 0.08 for the particle filter's search too: 79 (it blurs the search).
     uncalibrated_range_fraction: float = 0.08
     #: A self-calibrating camera (:mod:`swarmloc.agents.replay.calibration`) counts as
-    #: corrected only once its calibration has folded the bias this many times: the first fold
+    #: corrected only once its calibration has folded the bias this many times (a calibration
+    #: taken from a teammate counts as one, until the camera's own first fold): the first fold
     #: falls short, since the filter absorbed part of the bias while the camera was uncorrected
     #: (robot 2, seed 9: ``c2`` -0.23 after it against the Vicon fit's -0.50), and a filter that
     #: then takes the ranges for 2.5 % noise learns the rest of the bias as a speed scale (1.10,

@@ -441,11 +441,11 @@ def polar_covariance(range_m: float, direction_rad: float, range_std_m: float,
 # --------------------------------------------------------------------------------------------
 
 REPORT_TYPE = "mrclam"
-REPORT_VERSION = 1
+REPORT_VERSION = 2
 #: At most this many teammate measurements and pose samples in one report.
 MAX_REPORT_SIGHTINGS = 32
 MAX_REPORT_SAMPLES = 1024
-_REPORT_KEYS = frozenset({"v", "t", "id", "tick", "state", "seen", "samples"})
+_REPORT_KEYS = frozenset({"v", "t", "id", "tick", "state", "seen", "samples", "camera"})
 _MAX_COORDINATE_M = 1e5
 _COV_INDEX = np.array([0, 1, 2, 1, 3, 4, 2, 4, 5])
 _UPPER = (np.array([0, 0, 0, 1, 1, 2]), np.array([0, 1, 2, 1, 2, 2]))
@@ -456,11 +456,14 @@ class TeammateReport:
     """What a robot broadcasts after a tick: its pose estimate and covariance, the teammates it
     measured at that tick (``seen`` rows ``(robot_id, range_m, bearing_rad)``, ranges already
     corrected by its camera calibration) and optionally pose samples ``(Q, 3)`` of its belief
-    (CFS-GA's above-average individuals).
+    (CFS-GA's above-average individuals), and optionally the camera's range bias as its own
+    self-calibration has folded it (``camera_bias``: ``(c0, c2, folds)``, folds >= 1; see
+    :class:`~swarmloc.agents.replay.calibration.SelfCalibratingLocalizer`).
 
-    Wire format (msgpack map): ``{"v": 1, "t": "mrclam", "id": int, "tick": int,
+    Wire format (msgpack map): ``{"v": 2, "t": "mrclam", "id": int, "tick": int,
     "state": <bin: 9 little-endian float64: x, y, theta, cov xx, xy, x-theta, yy, y-theta,
-    theta-theta>, "seen": <bin: M x 3 float64>, "samples": <bin: Q x 3 float32>}``.
+    theta-theta>, "seen": <bin: M x 3 float64>, "samples": <bin: Q x 3 float32>,
+    "camera": <bin: empty, or 3 float64: c0, c2, folds>}`` (version 2 added ``camera``).
     """
 
     robot_id: int
@@ -469,6 +472,7 @@ class TeammateReport:
     covariance: np.ndarray  #: (3, 3)
     seen: np.ndarray  #: (M, 3)
     samples: np.ndarray  #: (Q, 3), Q may be 0
+    camera_bias: tuple[float, float, int] | None = None
 
     def encode(self) -> bytes:
         state = np.concatenate([self.pose, self.covariance[_UPPER]]).astype("<f8")
@@ -477,6 +481,7 @@ class TeammateReport:
             "state": state.tobytes(),
             "seen": np.ascontiguousarray(self.seen, dtype="<f8").tobytes(),
             "samples": np.ascontiguousarray(self.samples, dtype="<f4").tobytes(),
+            "camera": encode_camera_bias(self.camera_bias),
         }
         data = msgpack.packb(wire, use_bin_type=True)
         if len(data) > MAX_PAYLOAD_BYTES:
@@ -496,6 +501,40 @@ class TeammateReport:
 
 
 _NO_ROWS = np.zeros((0, 3))
+
+
+def encode_camera_bias(bias: tuple[float, float, int] | None) -> bytes:
+    """The wire form of a report's ``camera_bias`` (empty: none)."""
+    if bias is None:
+        return b""
+    return np.array(bias, dtype="<f8").tobytes()
+
+
+def with_camera_bias(payload: bytes, bias: tuple[float, float, int]) -> bytes:
+    """A report's payload with its ``camera`` field set to ``bias`` (a self-calibrating
+    wrapper adds its calibration to the report its localizer built)."""
+    wire = msgpack.unpackb(payload, raw=False)
+    wire["camera"] = encode_camera_bias(bias)
+    return msgpack.packb(wire, use_bin_type=True)
+
+
+def _camera_bias(raw) -> tuple[float, float, int] | None:
+    """A report's ``camera`` field: ``(c0, c2, folds)`` or None; ``ValueError`` naming what is
+    wrong (a range scale under 0.2 is refused, as :class:`CameraNoise` refuses it)."""
+    if not isinstance(raw, bytes):
+        raise ValueError(f"payload.camera: expected bytes, got {type(raw).__name__}")  # noqa: TRY004
+    if not raw:
+        return None
+    if len(raw) != 24:
+        raise ValueError(f"payload.camera: expected 3 float64 (c0, c2, folds), got {len(raw)} bytes")
+    c0, c2, folds = np.frombuffer(raw, dtype="<f8").tolist()
+    if not all(map(math.isfinite, (c0, c2, folds))):
+        raise ValueError("payload.camera: must be finite")
+    if not (1.0 + c0 > 0.2 and 1.0 + c0 + c2 > 0.2) or abs(c0) > 1.0 or abs(c2) > 1.0:
+        raise ValueError(f"payload.camera: implausible range bias c0={c0}, c2={c2}")
+    if folds != round(folds) or not 1 <= folds <= 2**31:
+        raise ValueError(f"payload.camera: folds must be an integer >= 1, got {folds}")
+    return c0, c2, int(folds)
 
 
 def _rows(raw, name: str, dtype: str, limit: int) -> np.ndarray:
@@ -539,6 +578,7 @@ def _unpack_report(payload: bytes) -> dict:
         raise ValueError(f"payload.t: expected {REPORT_TYPE!r}, got {wire['t']!r}")
     if type(wire["v"]) is not int or wire["v"] != REPORT_VERSION:
         raise ValueError(f"payload.v: expected {REPORT_VERSION}, got {wire['v']!r}")
+    wire["camera"] = _camera_bias(wire["camera"])  # small: checked for every payload
     return wire
 
 
@@ -570,7 +610,7 @@ def _report_from_wire(wire: dict) -> TeammateReport:
     samples = _rows(wire["samples"], "samples", "<f4", MAX_REPORT_SAMPLES)
     if samples.shape[0] and (np.abs(samples[:, :2]) > _MAX_COORDINATE_M).any():
         raise ValueError("payload.samples: positions must lie within 1e5 m")
-    return TeammateReport(wire["id"], wire["tick"], pose, cov, seen, samples)
+    return TeammateReport(wire["id"], wire["tick"], pose, cov, seen, samples, wire["camera"])
 
 
 def decode_received(received: Sequence[Message], robot_id: int,
@@ -601,6 +641,24 @@ def decode_received(received: Sequence[Message], robot_id: int,
             continue
         reports[msg.sender_id] = report
     return reports, rejected
+
+
+def teammate_camera_biases(received: Sequence[Message], robot_id: int
+                           ) -> dict[int, tuple[float, float, int]]:
+    """The camera biases ``(c0, c2, folds)`` the teammates broadcast, by sender id (the latest
+    wins). A malformed payload is left out here: the localizer's own :func:`decode_received`
+    counts it."""
+    out: dict[int, tuple[float, float, int]] = {}
+    for msg in received:
+        if msg.sender_id == robot_id:
+            continue
+        try:
+            bias = _unpack_report(msg.payload)["camera"]
+        except ValueError:
+            continue
+        if bias is not None:
+            out[msg.sender_id] = bias
+    return out
 
 
 @dataclass(frozen=True)

@@ -39,7 +39,11 @@ from pathlib import Path
 
 import numpy as np
 
-from swarmloc.agents.replay.calibration import SelfCalibratingLocalizer, robust_std
+from swarmloc.agents.replay.calibration import (
+    SelfCalibratingLocalizer,
+    SelfCalibrationParams,
+    robust_std,
+)
 from swarmloc.agents.replay.localizers import (
     ALGORITHMS,
     CameraNoise,
@@ -56,7 +60,7 @@ MRCLAM_STREAM = 7
 #: The report's line-up, in table order.
 REPORT_ALGORITHMS = ("dr", "ekf", "pf", "cfsga", "ssga", "hybrid")
 #: ``ReplayConfig.calibration``: self (no ground truth), the Vicon fit (reference), none.
-CALIBRATIONS = ("self", "vicon", "none")
+CALIBRATIONS = ("self", "self-own", "vicon", "none")
 #: ``ReplayConfig.start``.
 STARTS = ("known", "unknown")
 #: The localizers that can start from an unknown pose (a population over the whole field).
@@ -83,7 +87,9 @@ class ReplayConfig:
     duration_s: float | None = None
     #: How each robot's camera range bias is found (:data:`CALIBRATIONS`): ``self``, estimated
     #: while localizing from the robot's own data
-    #: (:class:`~swarmloc.agents.replay.calibration.SelfCalibratingLocalizer`, no ground truth);
+    #: (:class:`~swarmloc.agents.replay.calibration.SelfCalibratingLocalizer`, no ground truth;
+    #: cooperative, a robot whose camera has not folded yet starts from a teammate's broadcast
+    #: calibration); ``self-own``, the same from the robot's own data only;
     #: ``vicon``, fitted (:func:`fit_camera`) on the first ``calibration_s`` seconds of readings
     #: against the Vicon ground truth (a reference: ground truth in the loop); ``none``: ``camera``
     #: as it is.
@@ -254,8 +260,9 @@ def replay_localizer(dataset: MrclamDataset, world: ReplayWorld, config: ReplayC
                           camera=camera, cooperative=config.cooperative,
                           initial_area_m=((*lm.min(axis=0), *lm.max(axis=0)) if unknown else None))
     brain = build_localizer(config.algorithm, setup, robot_rng(config.seed, rid), config.params)
-    if config.calibration == "self":
-        brain = SelfCalibratingLocalizer(brain)
+    if config.calibration in ("self", "self-own"):
+        brain = SelfCalibratingLocalizer(
+            brain, SelfCalibrationParams(from_teammates=config.calibration == "self"))
     return brain
 
 
@@ -412,7 +419,9 @@ def add_arguments(p) -> None:
     p.add_argument("--duration-s", type=float, default=None, help="replay only this long")
     p.add_argument("--calibration", default="self",
                    help="camera range bias: self (estimated while localizing, no ground truth; "
-                        "the default), vicon (fitted against the ground truth: a reference), "
+                        "cooperative, a camera not yet calibrated starts from a teammate's "
+                        "calibration; the default), self-own (the same, each robot from its own "
+                        "readings only), vicon (fitted against the ground truth: a reference), "
                         "none")
     p.add_argument("--calibration-s", type=float, default=120.0,
                    help="with --calibration vicon: fit on the first SECONDS of readings "

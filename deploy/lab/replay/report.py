@@ -41,7 +41,7 @@ _ROUNDED = frozenset({"position_rmse_m", "heading_rmse_rad", "final_error_m", "l
 _DEFAULTS = {"calibration": "vicon", "start": "known", "kidnap_s": None}
 #: Issue 19's bar for a global localization: under LOCALIZED_M within this long of the start.
 LOCALIZE_WITHIN_S = 60.0
-_CALIBRATION_ORDER = {"self": 0, "none": 1, "vicon": 2}
+_CALIBRATION_ORDER = {"self": 0, "self-own": 1, "none": 2, "vicon": 3}
 
 
 def load_replay_results(paths) -> list[dict]:
