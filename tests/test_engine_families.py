@@ -67,9 +67,11 @@ def test_list_shows_every_shipped_spec_of_every_family(capsys):
     assert {f for f, _ in listed.values()} == {"epuck", "laser", "vision", "replay"}
     assert listed["vision"] == ("vision", 3 * 2 * 30 + 3 * 10 + 10)
     # global: 4 algorithms x alone/coop x 40 seeds; deterministic: 3 x 2; kidnap: 4 x 2 x 3
-    # seeds; stochastic: 3 x 2 x 3 seeds; reference: 2 x 2 x 2 calibrations.
+    # seeds; stochastic: 3 x 2 x 3 seeds; reference: 2 x 2 x 2 calibrations; each camera on
+    # its own readings: the hybrid cooperative from an unknown start (40 seeds), the
+    # cooperative EKF and hybrid from the known start.
     assert listed["mrclam6"] == ("replay", 4 * 2 * 40 + 3 * 2 + 4 * 2 * 3 + 3 * 2 * 3
-                                 + 2 * 2 * 2)
+                                 + 2 * 2 * 2 + 40 + 2)
     assert cli_main(["experiment", "--list"]) == 0
     out = capsys.readouterr().out
     for name in shipped_specs():
