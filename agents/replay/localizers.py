@@ -520,7 +520,7 @@ def with_camera_bias(payload: bytes, bias: tuple[float, float, int]) -> bytes:
 
 def _camera_bias(raw) -> tuple[float, float, int] | None:
     """A report's ``camera`` field: ``(c0, c2, folds)`` or None; ``ValueError`` naming what is
-    wrong (a range scale under 0.2 is refused, as :class:`CameraNoise` refuses it)."""
+    wrong (a bias :class:`CameraNoise` refuses is refused)."""
     if not isinstance(raw, bytes):
         raise ValueError(f"payload.camera: expected bytes, got {type(raw).__name__}")  # noqa: TRY004
     if not raw:
@@ -530,8 +530,12 @@ def _camera_bias(raw) -> tuple[float, float, int] | None:
     c0, c2, folds = np.frombuffer(raw, dtype="<f8").tolist()
     if not all(map(math.isfinite, (c0, c2, folds))):
         raise ValueError("payload.camera: must be finite")
-    if not (1.0 + c0 > 0.2 and 1.0 + c0 + c2 > 0.2) or abs(c0) > 1.0 or abs(c2) > 1.0:
+    if abs(c0) > 1.0 or abs(c2) > 1.0:
         raise ValueError(f"payload.camera: implausible range bias c0={c0}, c2={c2}")
+    try:
+        CameraNoise(range_bias_c0=c0, range_bias_c2=c2)  # the camera's own plausibility rule
+    except ValueError as exc:
+        raise ValueError(f"payload.camera: implausible {exc}") from None
     if folds != round(folds) or not 1 <= folds <= 2**31:
         raise ValueError(f"payload.camera: folds must be an integer >= 1, got {folds}")
     return c0, c2, int(folds)
