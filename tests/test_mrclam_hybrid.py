@@ -263,13 +263,29 @@ def test_the_tracking_stage_doubts_ranges_until_the_camera_is_calibrated():
     assert off.ekf.setup.camera == camera
 
 
-def test_a_self_calibration_counts_as_corrected_from_its_second_fold():
-    """The EKF stage keeps doubting the ranges (``uncalibrated_range_fraction``) after the
-    self-calibration's first fold and takes its camera from the second (``uncalibrated_folds``
-    2): readings of landmarks at bearings within +-0.4 rad, 3 m away, with a range bias
-    ``-0.45 b^2``, the robot standing at the truth, a fold every 100 readings."""
+def test_a_self_calibration_counts_as_corrected_from_its_first_fold_by_default():
+    """By default (``uncalibrated_folds`` 1) the EKF stage stops doubting the ranges at the
+    self-calibration's first fold: the same fan of readings as below."""
     setup = fan_setup(CameraNoise(range_fraction=0.04))
     hybrid = build_localizer("hybrid", setup, np.random.default_rng(0), {})
+    assert hybrid.params.uncalibrated_folds == 1
+    wrapper = SelfCalibratingLocalizer(hybrid, SelfCalibrationParams(trust_window=5))
+    seen = {}
+    for k in range(250):
+        wrapper.step(fan_reading(k, c2=-0.45))
+        seen.setdefault(hybrid.calibration_folds, hybrid.ekf.setup.camera)
+    assert set(seen) >= {0, 1}
+    assert seen[0].range_fraction == 0.08
+    assert seen[1].range_fraction < 0.08 and seen[1].range_bias_c2 < -0.1  # the camera's own
+
+
+def test_a_self_calibration_counts_as_corrected_from_its_second_fold():
+    """With ``uncalibrated_folds`` 2 the EKF stage keeps doubting the ranges
+    (``uncalibrated_range_fraction``) after the self-calibration's first fold and takes its
+    camera from the second: readings of landmarks at bearings within +-0.4 rad, 3 m away, with
+    a range bias ``-0.45 b^2``, the robot standing at the truth, a fold every 100 readings."""
+    setup = fan_setup(CameraNoise(range_fraction=0.04))
+    hybrid = build_localizer("hybrid", setup, np.random.default_rng(0), {"uncalibrated_folds": 2})
     assert hybrid.params.uncalibrated_folds == 2
     wrapper = SelfCalibratingLocalizer(hybrid, SelfCalibrationParams(trust_window=5))
     seen = {}

@@ -40,7 +40,8 @@ own data while localizing:
   RMSE after localizing, gain 0.5 0.113 / 0.125 / 0.070 / 0.116 / 0.102 m, gain 1 0.098 /
   0.105 / 0.071 / 0.107 / 0.085 m; seeds 0-39, gain 1: 0.096 / 0.105 / 0.080 / 0.116 / 0.101 m
   (0.084 / 0.107 / 0.077 / 0.117 / 0.103 m with the hybrid's ``uncalibrated_folds`` 2, which
-  the first fold's shortfall asks for).
+  the first fold's shortfall asked for until the team's calibration; 1 since, see
+  :class:`~swarmloc.agents.replay.hybrid.HybridParams`).
   The price is noise: the calibration after a fold carries that fold's (100 readings); at the
   end of Dataset 6 ``c2`` is within 0.002-0.075 of the Vicon fit by robot, against 0-0.061 with
   gain 0.5, and on the synthetic runs of the tests up to 0.06 off (0.03 with gain 0.5). Also
