@@ -10,3 +10,10 @@ from swarmloc.deploy.scenario import VARIANTS
 
 READINGS = tuple(o for o in VARIANTS["v0-defaults"] if not o.startswith("agent.give_up_factor=")) + (
     "agent.give_up_factor=1.5",)
+
+#: Issue 42's communication process on, both ways of combining and both stops: ``COMM`` the mean
+#: of five messages with wandering robots waiting, ``COMM_EACH`` every one of three messages
+#: fused as it comes with every robot waiting, and nest and prey moved (``goal_fraction``).
+COMM = ("agent.encounter_messages=5", 'agent.encounter_stop="wandering"', "agent.encounter_window_s=1.5")
+COMM_EACH = ("agent.encounter_messages=3", 'agent.encounter_combine="each"', 'agent.encounter_stop="all"',
+             "world.arena.goal_fraction=0.25")

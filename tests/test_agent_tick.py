@@ -15,7 +15,7 @@ import math
 import msgpack
 import numpy as np
 import pytest
-from readings import READINGS
+from readings import COMM, COMM_EACH, READINGS
 
 from swarmloc.agents.epuck.agent import ForagingAgent
 from swarmloc.agents.epuck.agent_tick import PackedForagingTick
@@ -50,7 +50,7 @@ def _corrupt(sense: EpuckSense, tick: int) -> EpuckSense:
 @pytest.mark.parametrize(
     ("strategy", "readings"),
     [(s, ()) for s, v in STRATEGIES.items() if v.confidence == "distance" and not v.central]
-    + [("SSGIKF", READINGS), ("DSGIFF", READINGS)],
+    + [("SSGIKF", READINGS), ("DSGIFF", READINGS), ("SSGIKF", COMM), ("DSGIFF", COMM_EACH)],
 )
 def test_packed_tick_gives_the_reference_acts(strategy, readings):
     loaded = load_any("ES1", {"seed": 3}, [f'agent.strategy="{strategy}"', "world.robots=10", *readings])

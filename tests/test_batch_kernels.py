@@ -21,7 +21,7 @@ import math
 import numpy as np
 import pytest
 from numba import njit
-from readings import READINGS
+from readings import COMM, COMM_EACH, READINGS
 
 from swarmloc import numerics
 from swarmloc.agents.epuck import kernels as agent_kernels
@@ -242,7 +242,7 @@ def test_the_goals_sent_are_the_reference_ones(sends):
 
 
 
-@pytest.mark.parametrize("readings", [[], READINGS], ids=["defaults", "readings"])
+@pytest.mark.parametrize("readings", [[], READINGS, COMM, COMM_EACH], ids=["defaults", "readings", "comm", "comm-each"])
 def test_swarm_brain_equals_brains_of_one_over_the_wire(readings):
     # The batch engine steps one brain holding the whole swarm; agent processes each step a
     # brain of one, with messages that crossed the wire as msgpack payloads. Same seeded run,
@@ -495,10 +495,11 @@ def _swarm_state(world, brain):
             brain.partner_ids, brain.partner_until, [g.random() for g in brain.rngs]]
 
 
-@pytest.mark.parametrize("case", ["NC", "SSGIKF", "DSGIFF", "GLOBAL_RB", "crowd", "no_room", "readings"])
+@pytest.mark.parametrize("case", ["NC", "SSGIKF", "DSGIFF", "GLOBAL_RB", "crowd", "no_room", "readings", "comm",
+                                  "comm-each"])
 def test_compiled_ticks_leave_world_and_brains_as_their_methods_do(case):
     strategy = case if case in ("NC", "SSGIKF", "DSGIFF", "GLOBAL_RB") else "SSGIFF"
-    readings = READINGS if case == "readings" else ()
+    readings = {"readings": READINGS, "comm": COMM, "comm-each": COMM_EACH}.get(case, ())
     scenario = load_scenario("ES1", ["world.robots=20", f"agent.strategy={strategy}", "world.duration_s=15", *readings])
     runs = []
     for compiled in (True, False):

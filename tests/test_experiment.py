@@ -9,6 +9,7 @@ import re
 import textwrap
 from pathlib import Path
 
+import numpy as np
 import pytest
 from grid_helpers import SMALL, read_rows
 
@@ -171,7 +172,8 @@ def test_dry_run_prints_the_plan_and_writes_nothing(tmp_path, capsys):
 
 COLUMNS = ["experiment", "group", "setting", "scenario", "strategy", "beta", "robots", "duration_s",
            "seed", "replication", "agent.strategy", "recruitment_time_s", "robots_found_both",
-           "round_trips_total", "on_path_fraction_mean", "lost_total", "wall_s", "config_hash"]
+           "round_trips_total", "on_path_fraction_mean", "lost_total", "departures", "departure_error_m_median",
+           "wall_s", "config_hash"]
 
 
 def _optional_float(text: str):
@@ -203,6 +205,11 @@ def test_rows_equal_direct_batch_runs(tmp_path):
         assert int(row["round_trips_total"]) == m["round_trips_total"]
         assert _optional_float(row["on_path_fraction_mean"]) == m["on_path_fraction_mean"]
         assert int(row["lost_total"]) == int(direct.lost_count.sum())
+        assert int(row["departures"]) == direct.departure_error_m.size
+        if direct.departure_error_m.size:
+            assert float(row["departure_error_m_median"]) == round(float(np.median(direct.departure_error_m)), 4)
+        else:
+            assert row["departure_error_m_median"] == ""
         assert (row["experiment"], row["group"], row["scenario"], row["robots"],
                 float(row["duration_s"])) == ("tiny", "g", "ES1", "10", 400.0)
     # The comparison above is not vacuous.

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import pytest
 import zenoh
-from readings import READINGS
+from readings import COMM, READINGS
 
 from swarmloc.deploy.lab.epuck.batch import run_batch, run_ticks, swarm_brain
 from swarmloc.deploy.launch import ONE_THREAD_ZENOH_RUNTIME, supervised
@@ -124,7 +124,7 @@ def _batch_trajectory(scenario, every_ticks: int) -> dict[int, list]:
 
 
 
-@pytest.mark.parametrize("readings", [[], READINGS], ids=["defaults", "readings"])
+@pytest.mark.parametrize("readings", [[], READINGS, COMM], ids=["defaults", "readings", "comm"])
 def test_process_run_matches_batch_engine(tmp_path, readings):
     scenario, path = _scenario(tmp_path, ["world.robots=4", "world.duration_s=40.0", "world.seed=7", *readings])
     with supervised() as sup:

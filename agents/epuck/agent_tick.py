@@ -48,7 +48,7 @@ VIEWS = (
     # poses: before the tick, of the tick before (the frame of messages heard now), after the tick
     "pose", "frame_pose", "new_pose",
     "goal_xy", "goal_p_m", "goal_cov", "search_left_m", "turn_dir", "heard_bearing_rad", "heard_range_m",
-    "params", "cos_ir", "sin_ir", "geometry", "atan",
+    "encounter_acc", "params", "cos_ir", "sin_ir", "geometry", "atan",
     # the inbox as received: (range, bearing) per message; the accepted messages and their content
     "msg_range_bearing", "in_range_m", "in_bearing_rad", "c_distance", "c_angle", "c_p", "c_heard_bearing",
     # the answer: wheel speeds then pose (contiguous), the message fields
@@ -114,6 +114,7 @@ def _views(f, i, b):
     turn_dir, o = _take(f, o, n)
     heard_bearing_rad, o = _take2(f, o, n, k)
     heard_range_m, o = _take2(f, o, n, k)
+    encounter_acc, o = _take3(f, o, n, e, kernels.N_ENCOUNTER)
     params, o = _take(f, o, kernels.N_BRAIN_PARAMS)
     cos_ir, o = _take(f, o, 8)
     sin_ir, o = _take(f, o, 8)
@@ -172,7 +173,7 @@ def _views(f, i, b):
     b_extent = o
     return (
         (encoder_steps, ir, ground, pose, frame_pose, new_pose, goal_xy, goal_p_m, goal_cov, search_left_m,
-         turn_dir, heard_bearing_rad, heard_range_m, params, cos_ir, sin_ir, geometry, atan, msg_range_bearing,
+         turn_dir, heard_bearing_rad, heard_range_m, encounter_acc, params, cos_ir, sin_ir, geometry, atan, msg_range_bearing,
          in_range_m, in_bearing_rad, c_distance, c_angle, c_p, c_heard_bearing, cmd, pose_out, distance, angle, p,
          heard_bearing_out),
         (header, robot_ids, target, lost_count, visit_ticks, turn_ticks, straight_ticks, heard_ids, partner_ids,
@@ -197,7 +198,7 @@ def _tick(f, i, b, buf, payload_out):
     ``encode_payload`` error code below -1."""
     fv, iv, bv, _ = _views(f, i, b)
     (encoder_steps, ir, ground, pose, frame_pose, new_pose, goal_xy, goal_p_m, goal_cov, search_left_m,
-     turn_dir, heard_bearing_rad, heard_range_m, params, cos_ir, sin_ir, geometry, atan, msg_range_bearing,
+     turn_dir, heard_bearing_rad, heard_range_m, encounter_acc, params, cos_ir, sin_ir, geometry, atan, msg_range_bearing,
      in_range_m, in_bearing_rad, c_distance, c_angle, c_p, c_heard_bearing, cmd, pose_out, distance, angle, p,
      heard_bearing_out) = fv
     (header, robot_ids, target, lost_count, visit_ticks, turn_ticks, straight_ticks, heard_ids, partner_ids,
@@ -225,7 +226,7 @@ def _tick(f, i, b, buf, payload_out):
         encoder_steps, ir, ground, tick,
         pose, new_pose, frame_pose, robot_ids, known, goal_xy, goal_p_m, goal_cov, target, searching,
         search_left_m, lost_count, visit_ticks, turn_ticks, straight_ticks, turn_dir, heard_ids, heard_bearing_rad,
-        heard_range_m, partner_ids, partner_until, adopted,
+        heard_range_m, partner_ids, partner_until, encounter_acc, adopted,
         receiver[:m], in_sender_id[:m], in_range_m[:m], in_bearing_rad[:m], content_row[:m], c_known[:m],
         c_distance[:m], c_angle[:m], c_p[:m], c_heard_ids[:m], c_heard_bearing[:m],
         params, settings, math_fns, rng_fn, rng_state, cos_ir, sin_ir,
@@ -311,7 +312,7 @@ class PackedForagingTick:
             raise ValueError("PackedForagingTick: a one-robot brain with distance confidence and its own motors only")
         _load_kernel(brain)
         n, k, e = 1, brain.config.heard_capacity, brain.config.encounter_memory
-        size = 256 + 64 * k + max_messages * (16 + 8 * k)
+        size = 256 + 64 * k + kernels.N_ENCOUNTER * e + max_messages * (16 + 8 * k)
         self.f, self.i, self.b = np.zeros(size), np.zeros(size, np.int64), np.zeros(size, bool)
         self.i[:N_HEADER] = (n, k, e, max_messages, brain.tick, 0, 0, 0, -1)
         fv, iv, bv, extents = _views(self.f, self.i, self.b)
@@ -321,7 +322,7 @@ class PackedForagingTick:
         v = self.view
         for name in ("known", "goal_xy", "goal_p_m", "target", "searching", "search_left_m", "lost_count",
                      "visit_ticks", "turn_ticks", "straight_ticks", "turn_dir", "heard_ids", "heard_bearing_rad",
-                     "heard_range_m", "partner_ids", "partner_until", "robot_ids"):
+                     "heard_range_m", "partner_ids", "partner_until", "encounter_acc", "robot_ids"):
             v[name][...] = getattr(brain, name)
         v["adopted"][...] = brain._adopted
         v["pose"][...] = brain.pose

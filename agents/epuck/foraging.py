@@ -56,6 +56,9 @@ def agent_rng(seed: int, robot_id: int) -> np.random.Generator:
     """Each agent's own generator, derived from the run seed and its robot id."""
     return np.random.default_rng([seed, AGENT_STREAM, robot_id])
 
+#: ``AgentConfig.encounter_stop`` values, in the order of the kernels' STOP_* codes.
+ENCOUNTER_STOPS = ("none", "wandering", "all")
+
 #: Controller state codes reported in every Act (the contract is in protocol/epuck.py).
 TARGET_NONE, TARGET_NEST, TARGET_PREY = 0, 1, 2
 KNOWS_BOTH = STATE_KNOWS_BOTH
@@ -216,6 +219,36 @@ class AgentConfig:
     #: under 20 %.
     give_up_factor: float = 4.0
 
+    # -- The communication process of an encounter (issue 42). Seed 000 §6.2 (real robots): "the
+    # time used in the communication is longer in the real robots scenario. This is because
+    # errors in the communication makes the communication layer repeat some messages. Therefore,
+    # robots wait a little more time (around 20-30%) in the communication process"; §6.1.1: "when
+    # robots are looking for one of the areas and they find a neighbor, they stop and check if
+    # the neighbor is transmitting information about the unknown area"; §5: the IR sensors
+    # "are used to detect the presence of obstacles or neighbors with whom the robots can
+    # communicate", and the controller has *Send Data* and *Receive Data* layers. So an encounter
+    # is a process during which robots wait and messages are repeated; the text gives neither how
+    # many messages nor how the receiver combines them. Each message crosses the board with fresh
+    # range and bearing noise (+-2.5 cm, +-20 deg), so combining the messages of one encounter
+    # shrinks the error eq. 27 makes of them. The defaults are chosen on the ablation
+    # docs/so-000-comm/ (deploy/experiments/so-000-comm.toml); before issue 42 an encounter was
+    # one message and nobody waited (variant ``v2-defaults``).
+
+    #: How many of a partner's messages one encounter combines (1: the first message is fused
+    #: at once, as before issue 42). The encounter ends when that many have crossed, or when
+    #: ``encounter_window_s`` has passed since the first (what was collected is then used).
+    encounter_messages: int = 1
+    #: How the receiver combines them: ``"mean"`` fuses the mean of the estimates transformed
+    #: with eq. 27 (and the mean ``p``) once, with the strategy's filter; ``"each"`` fuses every
+    #: message as it comes (eq. 14 for the first if the goal is unknown, eq. 15-16 after).
+    encounter_combine: str = "mean"
+    #: The longest an encounter collects messages, from its first (s).
+    encounter_window_s: float = 1.0
+    #: Who waits, wheels still, while one of its encounters collects: ``"none"``, ``"wandering"``
+    #: (robots looking for an area, seed 000 §6.1.1's "they stop and check"), ``"all"`` (seed 000
+    #: §6.2's "robots wait [...] in the communication process"). The avoid layer still acts.
+    encounter_stop: str = "none"
+
     def __post_init__(self):
         try:
             STRATEGIES.get(self.strategy)
@@ -249,6 +282,15 @@ class AgentConfig:
             raise ValueError("search_overshoot_m, avoid_threshold and steering_gain must be positive")
         if self.encounter_gap_s < 0 or not 1 <= self.encounter_memory <= 16:
             raise ValueError("encounter_gap_s must be >= 0 and encounter_memory in 1..16")
+        if type(self.encounter_messages) is not int or not 1 <= self.encounter_messages <= 50:
+            raise ValueError(f"encounter_messages: must be an integer in 1..50, got {self.encounter_messages!r}")
+        if self.encounter_combine not in ("mean", "each"):
+            raise ValueError(f"encounter_combine: expected 'mean' or 'each', got {self.encounter_combine!r}")
+        if not 0.0 < self.encounter_window_s <= 60.0:
+            raise ValueError(f"encounter_window_s: must be in (0, 60] s, got {self.encounter_window_s}")
+        if self.encounter_stop not in ENCOUNTER_STOPS:
+            raise ValueError(f"encounter_stop: expected one of {', '.join(map(repr, ENCOUNTER_STOPS))}, "
+                             f"got {self.encounter_stop!r}")
         # 3 is the most that fits the board's 64-byte payload with any robot id.
         if not 0 <= self.heard_capacity <= 3:
             raise ValueError(f"heard_capacity: must be in 0..3, got {self.heard_capacity}")
@@ -446,6 +488,8 @@ class ForagingBrain:
         self.tick = 0
         self.partner_ids = np.full((n, config.encounter_memory), -1, np.int64)
         self.partner_until = np.zeros((n, config.encounter_memory), np.int64)
+        # Each partner slot's encounter: what it collected (agents/epuck/kernels.py: E_*).
+        self.encounter_acc = np.zeros((n, config.encounter_memory, kernels.N_ENCOUNTER))
         self._no_cov = np.zeros((n, 2, 3, 3))  # stands in for goal_cov where there is none
         self._adopted = np.zeros((n, 2), bool)
         # Goal vectors of the motor and send layers, their angles, robots drawing a new walk.
@@ -484,6 +528,10 @@ class ForagingBrain:
             (kernels.S_KNOWS_BOTH, KNOWS_BOTH), (kernels.S_MOTORS, 1),
             (kernels.S_P_IS_DISTANCE, config.p_after_fusion == "distance"),
             (kernels.S_SENDS_LAST, config.sends == "last-visited"),
+            (kernels.S_ENCOUNTER_MESSAGES, config.encounter_messages),
+            (kernels.S_COMBINE_EACH, config.encounter_combine == "each"),
+            (kernels.S_WINDOW_TICKS, max(1, round(config.encounter_window_s / tick_s))),
+            (kernels.S_STOP_MODE, ENCOUNTER_STOPS.index(config.encounter_stop)),
         ):
             self._settings[slot] = int(value)
         self._math = numerics.numpy_math()  # numpy's exp and arctan2, bit for bit
@@ -543,7 +591,7 @@ class ForagingBrain:
             self.goal_p_m, self.goal_cov if self.goal_cov is not None else self._no_cov, self.target,
             self.searching, self.search_left_m, self.lost_count, self.visit_ticks, self.turn_ticks,
             self.straight_ticks, self.turn_dir, self.heard_ids, self.heard_bearing_rad, self.heard_range_m,
-            self.partner_ids, self.partner_until, self._adopted,
+            self.partner_ids, self.partner_until, self.encounter_acc, self._adopted,
         )
 
     def _tick_constants(self) -> tuple:

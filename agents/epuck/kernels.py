@@ -47,6 +47,8 @@ _TWO_PI = 2.0 * math.pi
 NEST, PREY, NONE = 0, 1, -1
 #: Gains of :func:`brain_update`.
 GAIN_NONE, GAIN_KALMAN, GAIN_FERMI = 0, 1, 2
+#: Who waits while an encounter collects messages (:func:`motor_commands`).
+STOP_NONE, STOP_WANDERING, STOP_ALL = 0, 1, 2
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -101,6 +103,74 @@ def classify_ground(ground, black_below, grey_below):
     return out
 
 
+#: Slots of an encounter's record, ``encounter_acc[robot, partner slot]``: per goal the sums of
+#: the partner's estimates (x, y in the receiver's odometric frame) and ``p`` and how many
+#: messages carried it (4 slots a goal), then the messages received so far (0: no encounter
+#: collecting) and the tick the encounter began.
+E_MESSAGES, E_START, N_ENCOUNTER = 8, 9, 10
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _receive_goal(rec, goal, x_other, y_other, p_other, known, goal_xy, goal_p_m, goal_cov, use_cov, target,
+                  adopted, double, gain, beta, confidence_unit_m, math_fns, p_is_distance):
+    """Robot ``rec`` receives a neighbour's estimate of ``goal`` (in its own odometric frame):
+    eq. 14 if it does not know the goal, else eq. 15-16 with the strategy's gain (eq. 20-22,
+    24-26); single strategies fuse only the goal they head to."""
+    if not known[rec, goal]:
+        # eq. 14: a robot that does not know the goal takes the neighbour's estimate
+        goal_xy[rec, goal, 0] = x_other
+        goal_xy[rec, goal, 1] = y_other
+        goal_p_m[rec, goal] = p_other
+        if use_cov:
+            goal_cov[rec, goal] = 0.0
+            goal_cov[rec, goal, 0, 0] = p_other * 1.0
+            goal_cov[rec, goal, 1, 1] = p_other * 1.0
+        known[rec, goal] = True
+        adopted[rec, goal] = True
+        return
+    # eq. 15-16: both know it; single strategies fuse only the goal they head to
+    if not (double or target[rec] == goal):
+        return
+    p_own = goal_p_m[rec, goal] / confidence_unit_m
+    p_oth = p_other / confidence_unit_m
+    if gain == GAIN_KALMAN:  # eq. 20-22
+        total = p_own + p_oth
+        g = p_own / total if total > 0.0 else 0.5
+        p_new = (1.0 - g) * p_own
+    else:  # eq. 24-26, the Fermi rule, with numpy's exp
+        g = 1.0 / (1.0 + np_exp(_clip(-beta * (p_own - p_oth), -500.0, 500.0), math_fns))
+        p_new = (1.0 - g) * p_own + g * p_oth
+    if use_cov:  # eq. 22 on the whole matrix: P <- (1 - g) P
+        scale = p_new / p_own if p_own > 0.0 else 0.0
+        for r in range(3):
+            for c in range(3):
+                goal_cov[rec, goal, r, c] *= scale
+    goal_xy[rec, goal, 0] = (1.0 - g) * goal_xy[rec, goal, 0] + g * x_other
+    goal_xy[rec, goal, 1] = (1.0 - g) * goal_xy[rec, goal, 1] + g * y_other
+    if use_cov or not p_is_distance:  # eq. 22 / 26 (table 1); else p stays d_k, eq. 23
+        goal_p_m[rec, goal] = p_new * confidence_unit_m
+
+
+@njit(cache=True, error_model="numpy")
+def _end_encounter(rec, slot, tick, gap_ticks, combine_each, encounter_acc, partner_until, known, goal_xy,
+                   goal_p_m, goal_cov, use_cov, target, adopted, double, gain, beta, confidence_unit_m, math_fns,
+                   p_is_distance):
+    """The end of robot ``rec``'s encounter in partner slot ``slot``: unless each message was
+    fused as it came (``combine_each``), the mean of the collected estimates and ``p`` of each
+    goal is received once (:func:`_receive_goal`); the partner is then ignored for ``gap_ticks``."""
+    if not combine_each:
+        for goal in range(2):
+            base = 4 * goal
+            count = encounter_acc[rec, slot, base + 3]
+            if count > 0.0:
+                _receive_goal(rec, goal, encounter_acc[rec, slot, base] / count,
+                              encounter_acc[rec, slot, base + 1] / count, encounter_acc[rec, slot, base + 2] / count,
+                              known, goal_xy, goal_p_m, goal_cov, use_cov, target, adopted, double, gain, beta,
+                              confidence_unit_m, math_fns, p_is_distance)
+    encounter_acc[rec, slot, E_MESSAGES] = 0.0
+    partner_until[rec, slot] = tick + gap_ticks
+
+
 @njit(cache=True, error_model="numpy")
 def brain_update(
     # odometry first (else done by the caller): encoder counts from the previous pose into pose
@@ -108,7 +178,7 @@ def brain_update(
     # state, updated in place
     pose, frame_pose, robot_ids, known, goal_xy, goal_p_m, goal_cov, use_cov, target, searching,
     search_left_m, lost_count, visit_ticks, turn_ticks, straight_ticks, heard_ids, heard_bearing_rad, heard_range_m,
-    partner_ids, partner_until, adopted,
+    partner_ids, partner_until, encounter_acc, adopted,
     # this tick's percepts
     ground, black_below, grey_below, ground_ahead_m, tick,
     # inbox, sorted by (receiver, sender); content row of each message
@@ -119,6 +189,9 @@ def brain_update(
     # readings of the seeds (AgentConfig.p_after_fusion, give_up_factor): keep p = distance
     # travelled after a fusion (eq. 23), the travel budget towards a target (0: none)
     p_is_distance, give_up_factor,
+    # the communication process of an encounter (AgentConfig.encounter_messages, _combine,
+    # _window_s): messages combined per encounter, fuse each (else their mean), longest collection
+    n_messages, combine_each, window_ticks,
     # outputs for the motor and send layers: goal vectors (2, N, 3) and who draws a new walk
     geometry, need, n_need,
 ):
@@ -193,12 +266,16 @@ def brain_update(
                     break
             if theirs < 0 or ours < 0:
                 continue
-            # One exchange per encounter: a recent partner still around is ignored.
+            # One exchange per encounter: a recent partner still around is ignored (n_messages
+            # 1); else the encounter collects up to n_messages of the partner's messages.
             recent = -1
             for k in range(n_partner):
                 if partner_ids[rec, k] == sender and partner_until[rec, k] > tick:
                     recent = k
                     break
+            if n_messages > 1 and recent >= 0 and encounter_acc[rec, recent, E_MESSAGES] == 0.0:
+                partner_until[rec, recent] = tick + gap_ticks  # this encounter's exchange is done
+                continue
             slot = recent
             if slot < 0:
                 slot = 0
@@ -206,9 +283,15 @@ def brain_update(
                     if partner_until[rec, k] < partner_until[rec, slot]:
                         slot = k
             partner_ids[rec, slot] = sender
-            partner_until[rec, slot] = tick + gap_ticks
-            if recent >= 0:
-                continue
+            if n_messages <= 1:
+                partner_until[rec, slot] = tick + gap_ticks
+                if recent >= 0:
+                    continue
+            elif recent < 0:  # a new encounter: collect until n_messages or the window's end
+                partner_until[rec, slot] = tick + window_ticks + gap_ticks
+                for q in range(N_ENCOUNTER):
+                    encounter_acc[rec, slot, q] = 0.0
+                encounter_acc[rec, slot, E_START] = tick
             gamma_sender = c_heard_bearing[row, theirs]
             gamma_own = heard_bearing_rad[rec, ours]
             range_own = heard_range_m[rec, ours]
@@ -226,39 +309,29 @@ def brain_update(
                 x_other = frame_pose[rec, 0] + (cos_t * lx - sin_t * ly)
                 y_other = frame_pose[rec, 1] + (sin_t * lx + cos_t * ly)
                 p_other = c_p[row, goal]
-                if not known[rec, goal]:
-                    # eq. 14: a robot that does not know the goal takes the neighbour's estimate
-                    goal_xy[rec, goal, 0] = x_other
-                    goal_xy[rec, goal, 1] = y_other
-                    goal_p_m[rec, goal] = p_other
-                    if use_cov:
-                        goal_cov[rec, goal] = 0.0
-                        goal_cov[rec, goal, 0, 0] = p_other * 1.0
-                        goal_cov[rec, goal, 1, 1] = p_other * 1.0
-                    known[rec, goal] = True
-                    adopted[rec, goal] = True
+                if n_messages > 1 and not combine_each:  # the mean of the encounter's messages
+                    base = 4 * goal
+                    encounter_acc[rec, slot, base] += x_other
+                    encounter_acc[rec, slot, base + 1] += y_other
+                    encounter_acc[rec, slot, base + 2] += p_other
+                    encounter_acc[rec, slot, base + 3] += 1.0
                     continue
-                # eq. 15-16: both know it; single strategies fuse only the goal they head to
-                if not (double or target[rec] == goal):
-                    continue
-                p_own = goal_p_m[rec, goal] / confidence_unit_m
-                p_oth = p_other / confidence_unit_m
-                if gain == GAIN_KALMAN:  # eq. 20-22
-                    total = p_own + p_oth
-                    g = p_own / total if total > 0.0 else 0.5
-                    p_new = (1.0 - g) * p_own
-                else:  # eq. 24-26, the Fermi rule, with numpy's exp
-                    g = 1.0 / (1.0 + np_exp(_clip(-beta * (p_own - p_oth), -500.0, 500.0), math_fns))
-                    p_new = (1.0 - g) * p_own + g * p_oth
-                if use_cov:  # eq. 22 on the whole matrix: P <- (1 - g) P
-                    scale = p_new / p_own if p_own > 0.0 else 0.0
-                    for r in range(3):
-                        for c in range(3):
-                            goal_cov[rec, goal, r, c] *= scale
-                goal_xy[rec, goal, 0] = (1.0 - g) * goal_xy[rec, goal, 0] + g * x_other
-                goal_xy[rec, goal, 1] = (1.0 - g) * goal_xy[rec, goal, 1] + g * y_other
-                if use_cov or not p_is_distance:  # eq. 22 / 26 (table 1); else p stays d_k, eq. 23
-                    goal_p_m[rec, goal] = p_new * confidence_unit_m
+                _receive_goal(rec, goal, x_other, y_other, p_other, known, goal_xy, goal_p_m, goal_cov, use_cov,
+                              target, adopted, double, gain, beta, confidence_unit_m, math_fns, p_is_distance)
+            if n_messages > 1:
+                encounter_acc[rec, slot, E_MESSAGES] += 1.0
+                if encounter_acc[rec, slot, E_MESSAGES] >= n_messages:
+                    _end_encounter(rec, slot, tick, gap_ticks, combine_each, encounter_acc, partner_until,
+                                   known, goal_xy, goal_p_m, goal_cov, use_cov, target, adopted, double, gain,
+                                   beta, confidence_unit_m, math_fns, p_is_distance)
+        # Encounters whose window ended before n_messages crossed fuse what they collected.
+        if n_messages > 1:
+            for i in range(n):
+                for k in range(n_partner):
+                    if encounter_acc[i, k, E_MESSAGES] > 0.0 and tick - encounter_acc[i, k, E_START] >= window_ticks:
+                        _end_encounter(i, k, tick, gap_ticks, combine_each, encounter_acc, partner_until,
+                                       known, goal_xy, goal_p_m, goal_cov, use_cov, target, adopted, double, gain,
+                                       beta, confidence_unit_m, math_fns, p_is_distance)
 
         # A wandering robot recruited to a goal heads for it (seed 000 §6.1.1); of two, the nearer.
         for i in range(n):
@@ -340,16 +413,29 @@ def goal_vectors(pose, frame_pose, goal_xy, target, turn_ticks, straight_ticks, 
 def motor_commands(
     pose, target, searching, search_left_m, turn_ticks, straight_ticks, turn_dir, geometry,
     atan, ir, cos_ir, sin_ir, cruise, spin, steering_gain, turn_in_place_rad,
-    arrival_tolerance_m, search_overshoot_m, avoid_threshold, vmax, cmd,
+    arrival_tolerance_m, search_overshoot_m, avoid_threshold, vmax, encounter_acc, stop_mode, cmd,
 ):
-    """Wheel speeds ``cmd`` ``(N, 2)`` of the forage, wander and avoid layers (seed 000 §5)."""
+    """Wheel speeds ``cmd`` ``(N, 2)`` of the forage, wander and avoid layers (seed 000 §5).
+
+    A robot whose encounter is collecting messages waits, wheels still, if ``stop_mode`` says
+    so (:data:`STOP_WANDERING`: robots without a target, :data:`STOP_ALL`: every robot;
+    ``AgentConfig.encounter_stop``); its random walk is frozen meanwhile, and avoid still
+    subsumes it."""
     n = pose.shape[0]
     half_pi = _PI / 2
     for i in range(n):
         err = 0.0
         in_place = False
         spin_dir = 0.0
-        if target[i] >= 0:  # forage: steer to the target's estimate
+        waiting = False
+        if stop_mode != STOP_NONE and (stop_mode == STOP_ALL or target[i] < 0):
+            for k in range(encounter_acc.shape[1]):
+                if encounter_acc[i, k, E_MESSAGES] > 0.0:
+                    waiting = True
+                    break
+        if waiting:
+            pass
+        elif target[i] >= 0:  # forage: steer to the target's estimate
             dist = math.hypot(geometry[0, i, 0], geometry[1, i, 0])
             if not searching[i] and dist < arrival_tolerance_m:
                 searching[i] = True
@@ -371,6 +457,9 @@ def motor_commands(
         if in_place:
             left = -spin * spin_dir
             right = spin * spin_dir
+        if waiting:
+            left = 0.0
+            right = 0.0
         # avoid: subsumes the layers below
         avoiding = False
         for k in range(ir.shape[1]):
@@ -433,7 +522,7 @@ def report_into(frame_pose, geometry, atan, known, goal_p_m, heard_ids, heard_be
  U_GIVE_UP_FACTOR, N_BRAIN_PARAMS) = range(23)
 #: Slots of the brain's integer settings in :func:`brain_tick`'s ``settings``.
 (S_DO_ODOMETRY, S_USE_COV, S_COMMUNICATES, S_DOUBLE, S_GAIN, S_GAP_TICKS, S_KNOWS_BOTH, S_MOTORS, S_P_IS_DISTANCE,
- S_SENDS_LAST, N_SETTINGS) = range(11)
+ S_SENDS_LAST, S_ENCOUNTER_MESSAGES, S_COMBINE_EACH, S_WINDOW_TICKS, S_STOP_MODE, N_SETTINGS) = range(15)
 
 
 @njit(cache=True, error_model="numpy")
@@ -457,8 +546,8 @@ def wander_draws(need, n_need, rng_fn, rng_state, params, turn_ticks, turn_dir, 
 @njit(cache=True, error_model="numpy")
 def act_tick(pose, target, searching, search_left_m, turn_ticks, straight_ticks, turn_dir, geometry, atan, ir,
              cos_ir, sin_ir, params, need, n_need, rng_fn, rng_state, frame_pose, known, goal_p_m, heard_ids,
-             heard_bearing_rad, knows_both, sends_last, cmd, known_out, distance, angle, p, heard_ids_out,
-             heard_bearing_out, state, pose_out, on_path):
+             heard_bearing_rad, knows_both, sends_last, encounter_acc, stop_mode, cmd, known_out, distance, angle,
+             p, heard_ids_out, heard_bearing_out, state, pose_out, on_path):
     """The brains' answer for one tick in one call: :func:`wander_draws` for the robots
     :func:`goal_vectors` put in ``need``, :func:`motor_commands` into ``cmd``,
     :func:`report_into` and ``on_path`` (a target and both goals known: state bits 0-1 and
@@ -467,7 +556,7 @@ def act_tick(pose, target, searching, search_left_m, turn_ticks, straight_ticks,
     motor_commands(pose, target, searching, search_left_m, turn_ticks, straight_ticks, turn_dir, geometry, atan, ir,
                    cos_ir, sin_ir, params[A_CRUISE], params[A_SPIN], params[A_STEERING_GAIN],
                    params[A_TURN_IN_PLACE], params[A_ARRIVAL_TOLERANCE], params[A_SEARCH_OVERSHOOT],
-                   params[A_AVOID_THRESHOLD], params[A_VMAX], cmd)
+                   params[A_AVOID_THRESHOLD], params[A_VMAX], encounter_acc, stop_mode, cmd)
     report_into(frame_pose, geometry, atan, known, goal_p_m, heard_ids, heard_bearing_rad, target, knows_both, pose,
                 sends_last, known_out, distance, angle, p, heard_ids_out, heard_bearing_out, state, pose_out)
     for i in range(state.shape[0]):
@@ -481,7 +570,7 @@ def brain_tick(
     # state, updated in place (see ForagingBrain); pose is written, from previous_pose
     previous_pose, pose, frame_pose, robot_ids, known, goal_xy, goal_p_m, goal_cov, target, searching,
     search_left_m, lost_count, visit_ticks, turn_ticks, straight_ticks, turn_dir, heard_ids, heard_bearing_rad,
-    heard_range_m, partner_ids, partner_until, adopted,
+    heard_range_m, partner_ids, partner_until, encounter_acc, adopted,
     # inbox, sorted by (receiver, sender); content row of each message
     receiver, sender_id, range_m, bearing_rad, content_row, c_known, c_distance, c_angle, c_p, c_heard_ids,
     c_heard_bearing,
@@ -500,13 +589,14 @@ def brain_tick(
         settings[S_DO_ODOMETRY] != 0, encoder_steps, previous_pose, params[U_METRES_PER_STEP], params[U_WHEELBASE],
         pose, frame_pose, robot_ids, known, goal_xy, goal_p_m, goal_cov, settings[S_USE_COV] != 0, target, searching,
         search_left_m, lost_count, visit_ticks, turn_ticks, straight_ticks, heard_ids, heard_bearing_rad,
-        heard_range_m, partner_ids, partner_until, adopted,
+        heard_range_m, partner_ids, partner_until, encounter_acc, adopted,
         ground, params[U_BLACK_BELOW], params[U_GREY_BELOW], params[U_GROUND_AHEAD], tick,
         receiver, sender_id, range_m, bearing_rad, content_row, c_known, c_distance, c_angle, c_p, c_heard_ids,
         c_heard_bearing,
         settings[S_COMMUNICATES] != 0, settings[S_DOUBLE] != 0, settings[S_GAIN], params[U_BETA],
         params[U_CONFIDENCE_UNIT], settings[S_GAP_TICKS], math_fns,
         settings[S_P_IS_DISTANCE] != 0, params[U_GIVE_UP_FACTOR],
+        settings[S_ENCOUNTER_MESSAGES], settings[S_COMBINE_EACH] != 0, settings[S_WINDOW_TICKS],
         geometry, need, n_need,
     )
     m = atan.shape[0] * atan.shape[1]
@@ -514,8 +604,9 @@ def brain_tick(
     if settings[S_MOTORS] != 0:
         act_tick(pose, target, searching, search_left_m, turn_ticks, straight_ticks, turn_dir, geometry, atan, ir,
                  cos_ir, sin_ir, params, need, n_need, rng_fn, rng_state, previous_pose, known, goal_p_m, heard_ids,
-                 heard_bearing_rad, settings[S_KNOWS_BOTH], settings[S_SENDS_LAST] != 0, cmd, known_out, distance,
-                 angle, p, heard_ids_out, heard_bearing_out, state, pose_out, on_path)
+                 heard_bearing_rad, settings[S_KNOWS_BOTH], settings[S_SENDS_LAST] != 0, encounter_acc,
+                 settings[S_STOP_MODE], cmd, known_out, distance, angle, p, heard_ids_out, heard_bearing_out, state,
+                 pose_out, on_path)
     else:
         knows_both = settings[S_KNOWS_BOTH]
         report_into(previous_pose, geometry, atan, known, goal_p_m, heard_ids, heard_bearing_rad, target, knows_both,

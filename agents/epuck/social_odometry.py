@@ -158,6 +158,23 @@ def sent_goals(known: np.ndarray, target: np.ndarray, sends: str = "both") -> np
     return known & ~heading
 
 
+#: How a receiver combines the messages of one encounter (``AgentConfig.encounter_combine``).
+COMBINE = ("mean", "each")
+
+
+def encounter_estimate(points_m: np.ndarray, p_m: np.ndarray) -> tuple[np.ndarray, float]:
+    """What one encounter of several messages gives a receiver that combines them by their mean
+    (issue 42; seed 000 §6.2: the communication layer "repeat[s] some messages"): the mean of
+    the partner's estimates, each transformed with eq. 27 from its own crossing, ``(M, 2)``, and
+    the mean of the ``p`` they carried, ``(M,)``. The receiver then fuses that one estimate with
+    its filter (eq. 14-16), as it would a single message."""
+    points_m = np.asarray(points_m, float)
+    p_m = np.asarray(p_m, float)
+    if points_m.ndim != 2 or points_m.shape[0] == 0 or points_m.shape[0] != p_m.shape[0]:
+        raise ValueError("encounter_estimate: need M >= 1 points (M, 2) and M values of p")
+    return points_m.mean(axis=0), float(p_m.mean())
+
+
 def transform_received(
     range_m: np.ndarray,
     bearing_receiver_rad: np.ndarray,

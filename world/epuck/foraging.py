@@ -75,8 +75,24 @@ class ArenaConfig:
     #: times as the robots need (:func:`tile_grid`) inside one set of outer walls; robot ``i``
     #: starts in the start disc of tile ``i * tiles // robots``.
     tile_robots: int = 0
+    #: Where nest and prey are, as a reading (issue 42). Seed 000 gives no positions: "All
+    #: setups are carried out in a similar arena (see Figure 7)", and the figure is not in the
+    #: text. 0 (default): ``nest_centre_m`` and ``prey_centre_m`` as given (the shipped ES1-ES3
+    #: put them 15 % of the long side from the short walls). ``f`` in (0, 0.5): both on the long
+    #: axis, at ``f`` and ``1 - f`` of the long side from one short wall, replacing the centres.
+    goal_fraction: float = 0.0
 
     def __post_init__(self):
+        if not 0.0 <= self.goal_fraction < 0.5:
+            raise ValueError(f"goal_fraction: must be in [0, 0.5) (0: the centres as given), got {self.goal_fraction}")
+        if self.goal_fraction > 0.0:
+            f = self.goal_fraction
+            if self.height_m >= self.width_m:
+                nest, prey = (self.width_m / 2, f * self.height_m), (self.width_m / 2, (1 - f) * self.height_m)
+            else:
+                nest, prey = (f * self.width_m, self.height_m / 2), ((1 - f) * self.width_m, self.height_m / 2)
+            object.__setattr__(self, "nest_centre_m", nest)
+            object.__setattr__(self, "prey_centre_m", prey)
         arena = self.arena()  # validates sizes and discs
         if isinstance(self.tile_robots, bool) or not isinstance(self.tile_robots, int) or self.tile_robots < 0:
             raise ValueError(f"tile_robots: must be an integer >= 0, got {self.tile_robots!r}")

@@ -8,8 +8,10 @@
   the second half of the run (fig. 16). "On the path" is decided by the caller (e.g. robots in
   the forage behaviour) and passed in as a mask.
 
-The world calls :meth:`ForagingMetrics.update` every tick with the *true* area of each body centre
-(``world.epuck.arena.area_at``), not what the robots believe. Tick ``k`` happens at time ``k * dt_s``.
+The world calls :meth:`ForagingMetrics.update` every tick with the *true* area under each robot's
+middle ground sensor, 3 cm ahead of the body centre (``protocol.epuck.GROUND_SENSOR_OFFSETS_M``,
+``world.epuck.kernels.sensor_areas``): where the robot itself can see an area (seed 000 §5,
+"The nest and prey areas are detected with the ground sensors"), not what it believes. Tick ``k`` happens at time ``k * dt_s``.
 Vectorised over robots; no randomness.
 """
 
@@ -57,7 +59,7 @@ class ForagingMetrics:
     def update(self, tick: int, area: np.ndarray, on_path: np.ndarray) -> None:
         """Record one tick.
 
-        ``area`` (N,): true AREA_* code of each body centre; ``on_path`` (N,) bool. Ticks must
+        ``area`` (N,): true AREA_* code under each middle ground sensor; ``on_path`` (N,) bool. Ticks must
         strictly increase from call to call.
         """
         tick = int(tick)

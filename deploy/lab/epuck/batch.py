@@ -62,6 +62,44 @@ class BatchResult:
     final_pose: np.ndarray
     pose_estimate: np.ndarray
     lost_count: np.ndarray
+    #: Error (m) of the target estimate at each departure (:class:`DepartureErrors`), in order.
+    departure_error_m: np.ndarray | None = None
+
+
+class DepartureErrors:
+    """A diagnostic of retrieval (issue 42): how far from the true area a robot is headed when it
+    sets out for it.
+
+    At every tick where a robot's target changes to an area (it left the other area, or was
+    recruited, or turned round), the vector from its dead-reckoned pose to its estimate of the
+    target, in its believed body frame, is laid at its true pose: the point it will drive to. The
+    error is that point's distance to the true centre of the area (the estimate is where the
+    ground sensor saw the area, inside its 0.1 m radius). Only for an arena of one tile (the
+    tiled ES3 has many nests). Called between the brains' step and the world's, it reads the
+    brains' targets and poses and the world's true poses of that tick."""
+
+    def __init__(self, world: ForagingWorld, brain: ForagingBrain):
+        self.world, self.brain = world, brain
+        arena = world.config.arena
+        self.goals_m = (None if arena.tile_robots else
+                        np.array([arena.nest_centre_m, arena.prey_centre_m], float))
+        self.previous = brain.target.copy()
+        self.errors_m: list[float] = []
+
+    def __call__(self) -> None:
+        target = self.brain.target
+        if self.goals_m is None or np.array_equal(target, self.previous):
+            return
+        for i in np.flatnonzero((target != self.previous) & (target >= 0)):
+            g = int(target[i])
+            est = self.brain.pose[i]
+            rel = self.brain.goal_xy[i, g] - est[:2]
+            true = self.world.pose[i]
+            turn = true[2] - est[2]
+            c, s = np.cos(turn), np.sin(turn)
+            aim = true[:2] + np.array([c * rel[0] - s * rel[1], s * rel[0] + c * rel[1]])
+            self.errors_m.append(float(np.hypot(*(aim - self.goals_m[g]))))
+        self.previous[:] = target
 
 
 def run_batch(scenario: Scenario) -> BatchResult:
@@ -70,13 +108,16 @@ def run_batch(scenario: Scenario) -> BatchResult:
     brain = swarm_brain(scenario)
     # seed 001's global imitation: a central system that knows the true poses, with its own noise
     central = central_rng(scenario.world.seed) if brain.strategy.central else None
+    departures = DepartureErrors(world, brain)
 
     def between() -> None:  # after the brains' step, before the world's
         if central is not None:
             imitate_brain(brain, world.pose, central, scenario.world.medium)
+        departures()
 
     run_ticks(world, brain, between)
-    return BatchResult(world.metrics.summary(), world.pose.copy(), brain.pose.copy(), brain.lost_count)
+    return BatchResult(world.metrics.summary(), world.pose.copy(), brain.pose.copy(), brain.lost_count,
+                       np.array(departures.errors_m))
 
 
 def run_ticks(world: ForagingWorld, brain: ForagingBrain, between: Callable[[], None] = lambda: None,
@@ -128,7 +169,7 @@ def batch_tick(
     b_encoder_steps, b_tick,
     b_previous_pose, b_pose, b_frame_pose, b_robot_ids, b_known, b_goal_xy, b_goal_p_m, b_goal_cov, b_target,
     b_searching, b_search_left_m, b_lost_count, b_visit_ticks, b_turn_ticks, b_straight_ticks, b_turn_dir,
-    b_heard_ids, b_heard_bearing_rad, b_heard_range_m, b_partner_ids, b_partner_until, b_adopted,
+    b_heard_ids, b_heard_bearing_rad, b_heard_range_m, b_partner_ids, b_partner_until, b_encounter_acc, b_adopted,
     c_known, c_distance, c_angle, c_p, c_heard_ids, c_heard_bearing,
     b_params, b_settings, b_math_fns, b_rng_fn, b_rng_state, b_cos_ir, b_sin_ir, b_geometry, b_atan, b_need,
     b_n_need,
@@ -157,7 +198,7 @@ def batch_tick(
         b_encoder_steps, o_ir, o_ground, b_tick,
         b_previous_pose, b_pose, b_frame_pose, b_robot_ids, b_known, b_goal_xy, b_goal_p_m, b_goal_cov, b_target,
         b_searching, b_search_left_m, b_lost_count, b_visit_ticks, b_turn_ticks, b_straight_ticks, b_turn_dir,
-        b_heard_ids, b_heard_bearing_rad, b_heard_range_m, b_partner_ids, b_partner_until, b_adopted,
+        b_heard_ids, b_heard_bearing_rad, b_heard_range_m, b_partner_ids, b_partner_until, b_encounter_acc, b_adopted,
         o_receiver[:kept], sender, o_range_m[:kept], o_bearing_rad[:kept], sender,
         c_known, c_distance, c_angle, c_p, c_heard_ids, c_heard_bearing,
         b_params, b_settings, b_math_fns, b_rng_fn, b_rng_state, b_cos_ir, b_sin_ir, b_geometry, b_atan, b_need,

@@ -11,7 +11,9 @@
 - :func:`columns` and :func:`row`: the setting (experiment, group, setting, scenario, strategy,
   beta, robots, duration_s, seed, replication, one column per grid key), the metrics of seed 000
   §6 (recruitment_time_s, empty if not reached; robots_found_both; round_trips_total;
-  on_path_fraction_mean; lost_total), wall_s and config_hash;
+  on_path_fraction_mean; lost_total), the retrieval diagnostic of issue 42 (departures, the
+  number of times a robot set out for an area, and departure_error_m_median, the median error
+  of the estimate it set out with: ``batch.DepartureErrors``), wall_s and config_hash;
 - :func:`prepare`: the kernels compiled once in the engine's process before the pool starts.
 
 The report template is :mod:`swarmloc.deploy.lab.epuck.report`.
@@ -22,6 +24,8 @@ from __future__ import annotations
 import hashlib
 import json
 import time
+
+import numpy as np
 
 from swarmloc.config import ConfigError
 from swarmloc.deploy.lab.experiment import (
@@ -37,7 +41,8 @@ from swarmloc.deploy.scenario import Scenario, load_scenario
 LEAD_COLUMNS = ("experiment", "group", "setting", "scenario", "strategy", "beta", "robots",
                 "duration_s", "seed", "replication")
 METRIC_COLUMNS = ("recruitment_time_s", "robots_found_both", "round_trips_total",
-                  "on_path_fraction_mean", "lost_total", "wall_s", "config_hash")
+                  "on_path_fraction_mean", "lost_total", "departures", "departure_error_m_median",
+                  "wall_s", "config_hash")
 #: The replication's seed is this scenario key.
 SEED_KEY = "world.seed"
 
@@ -102,6 +107,9 @@ def run_job(job: Job) -> dict:
         "round_trips_total": m["round_trips_total"],
         "on_path_fraction_mean": m["on_path_fraction_mean"],
         "lost_total": int(result.lost_count.sum()),
+        "departures": int(result.departure_error_m.size),
+        "departure_error_m_median": (round(float(np.median(result.departure_error_m)), 4)
+                                     if result.departure_error_m.size else None),
         "wall_s": round(time.perf_counter() - t0, 3),
     }
 
@@ -112,7 +120,8 @@ def row(spec: ExperimentSpec, job: Job, out: dict) -> list:
             out["robots"], out["duration_s"], job.seed, job.replication,
             *(grid.get(k) for k in spec.grid_keys()),
             out["recruitment_time_s"], out["robots_found_both"], out["round_trips_total"],
-            out["on_path_fraction_mean"], out["lost_total"], out["wall_s"], job.config_hash]
+            out["on_path_fraction_mean"], out["lost_total"], out["departures"],
+            out["departure_error_m_median"], out["wall_s"], job.config_hash]
 
 
 __all__ = ["LEAD_COLUMNS", "METRIC_COLUMNS", "SEED_KEY", "columns", "config_hash", "prepare",

@@ -67,6 +67,7 @@ from swarmloc.deploy.lab.report import (  # noqa: F401 (add_parser, main, main_r
     _mode,
     _n_text,
     _new_figure,
+    _ratio,
     _save,
     _slug,
     _style_boxplot,
@@ -508,6 +509,11 @@ def _draw_figures(table: _Table, out_dir: Path) -> list[FigureStatus]:
     return statuses
 
 
+def _lost_per_trip(rows: Sequence[dict]) -> list[dict]:
+    """Each row's lost events per round trip (no value where either is missing or no trip)."""
+    return [{"lost_per_round_trip": _ratio(r.get("lost_total"), r.get("round_trips_total"))} for r in rows]
+
+
 def _setting_table(table: _Table) -> list[str]:
     groups: dict[tuple, list] = defaultdict(list)
     for r in table.rows:
@@ -522,16 +528,21 @@ def _setting_table(table: _Table) -> list[str]:
         return (exp, rank, scenario, group, table.variant(rs[0]).sort_key(),
                 rs[0].get("robots") or 0)
 
+    # Issue 42's diagnostic of retrieval: lost events per round trip and the median error of the
+    # target estimate at departure (batch.DepartureErrors); "–" for rows made before it.
     lines = [("| experiment | group | setting | scenario | variant | robots | n | round trips "
-             "median [Q1-Q3] | recruitment time s median [Q1-Q3] | on path % median [Q1-Q3] |"),
-             "|---|---|---|---|---|---:|---:|---|---|---|"]
+             "median [Q1-Q3] | recruitment time s median [Q1-Q3] | on path % median [Q1-Q3] "
+             "| lost per round trip median | departure error m median |"),
+             "|---|---|---|---|---|---:|---:|---|---|---|---|---|"]
     for (exp, group, setting), rs in sorted(groups.items(), key=order):
         r = rs[0]
         lines.append("| " + " | ".join(_md(x) for x in (
             exp, group, setting, r.get("scenario"), table.variant(r).label(), r.get("robots"),
             len(rs), _fmt_summary(summarize(rs, "round_trips_total")),
             _fmt_summary(summarize(rs, "recruitment_time_s")),
-            _fmt_summary(summarize(rs, "on_path_fraction_mean"), 100.0, 2))) + " |")
+            _fmt_summary(summarize(rs, "on_path_fraction_mean"), 100.0, 2),
+            _fmt_summary(summarize(_lost_per_trip(rs), "lost_per_round_trip"), 1.0, 2),
+            _fmt_summary(summarize(rs, "departure_error_m_median"), 1.0, 2))) + " |")
     return lines
 
 
