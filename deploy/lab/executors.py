@@ -42,7 +42,7 @@ from swarmloc.config import ConfigError
 #: Result columns that measure the machine, not the model: they differ from run to run and from
 #: executor to executor; every other column of a row is the same whichever executor ran it.
 TIMING_COLUMNS = ("wall_s", "cpu_s")
-EXECUTORS = ("local", "dask")
+EXECUTORS = ("local", "dask", "inline")
 #: How long the client waits for the Dask scheduler to answer before giving up.
 DEFAULT_SCHEDULER_TIMEOUT_S = 10.0
 #: How long the client waits for a first worker to connect to the scheduler (a batch system may
@@ -78,6 +78,38 @@ class Executor(Protocol):
 
     def close(self) -> None:
         """Every job was handed back: release the workers or the connection."""
+
+
+# -- in this process ---------------------------------------------------------------------------
+
+
+class InlineExecutor:
+    """Every job in the calling process, one after the other: no pool to spawn, so it works from
+    a script read on stdin, under a debugger, and in a notebook whose functions a spawned worker
+    could not import. ``swarmloc.batch(..., workers=1)`` and ``--executor inline`` use it."""
+
+    name = "inline"
+    on_this_host = True
+
+    def workers(self) -> int:
+        return 1
+
+    def as_completed(self, fn, jobs):
+        from concurrent.futures import Future
+
+        for job in jobs:
+            fut: Future = Future()
+            try:
+                fut.set_result(fn(job))
+            except Exception as exc:  # noqa: BLE001 -- handed back as a pool would hand it
+                fut.set_exception(exc)
+            yield job, fut
+
+    def stop(self) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
 
 
 # -- the local pool ---------------------------------------------------------------------------
@@ -375,6 +407,10 @@ def make_executor(name: str, workers: int | None = None, scheduler: str | None =
                   tls: DaskTls | None = None,
                   worker_timeout_s: float = DEFAULT_WORKER_TIMEOUT_S) -> Executor:
     """The executor called ``name`` (:data:`EXECUTORS`); ConfigError for a bad combination."""
+    if name == "inline":
+        if scheduler or tls is not None:
+            raise ConfigError("--scheduler and --tls-* are for --executor dask")
+        return InlineExecutor()
     if name == "local":
         if scheduler:
             raise ConfigError("--scheduler is for --executor dask (the local pool needs none)")

@@ -81,6 +81,12 @@ def _convert(value: Any, tp, path: str):
     raise ConfigError(f"{path}: unsupported type {_type_name(tp)}")
 
 
+def did_you_mean(name: str, known, cutoff: float = 0.5) -> str:
+    """``"; did you mean 'x'?"`` with the closest of ``known`` (difflib), or ``""``."""
+    close = difflib.get_close_matches(name, list(known), n=1, cutoff=cutoff)
+    return f"; did you mean '{close[0]}'?" if close else ""
+
+
 def from_dict(cls, data: dict, path: str = ""):
     """Build dataclass ``cls`` from ``data``; missing keys take the dataclass defaults."""
     hints = typing.get_type_hints(cls)
@@ -89,8 +95,7 @@ def from_dict(cls, data: dict, path: str = ""):
     for key, value in data.items():
         where = f"{path}.{key}" if path else key
         if key not in fields:
-            close = difflib.get_close_matches(key, list(fields), n=1, cutoff=0.5)
-            hint = f"; did you mean '{close[0]}'?" if close else ""
+            hint = did_you_mean(key, fields)
             valid = ", ".join(sorted(fields))
             raise ConfigError(f"unknown key '{where}'{hint} (valid keys: {valid})")
         kwargs[key] = _convert(value, hints[key], where)
