@@ -418,15 +418,39 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _take_plugins(argv: list[str]) -> tuple[list[str], list[str]]:
+    """``--plugin X`` / ``--plugin=X`` wherever they stand (before or after the verb): the
+    plugins and the other arguments. Plugins load before the parser is built, so that every
+    command sees their names (issue 48: after the verb, ``--plugin`` was "unrecognized")."""
+    plugins, rest = [], []
+    it = iter(argv)
+    for arg in it:
+        if arg == "--plugin":
+            value = next(it, None)
+            if value is None:
+                raise ConfigError("--plugin: expected a module or a .py file after it")
+            plugins.append(value)
+        elif arg.startswith("--plugin="):
+            plugins.append(arg.partition("=")[2])
+        else:
+            rest.append(arg)
+    return plugins, rest
+
+
 def main(argv: list[str] | None = None) -> int:
+    try:
+        from swarmloc.registry import add_plugins
+
+        plugins, argv = _take_plugins(sys.argv[1:] if argv is None else list(argv))
+        add_plugins(plugins)  # and those of SWARMLOC_PLUGINS / entry points
+    except (ConfigError, ValueError) as exc:
+        print(f"swarmloc: error: {exc}", file=sys.stderr)
+        return 2
     parser = build_parser()
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
                         format="%(asctime)s %(name)s %(levelname)s %(message)s")
     try:
-        from swarmloc.registry import add_plugins
-
-        add_plugins(args.plugin)  # and those of SWARMLOC_PLUGINS / entry points
         return args.func(args)
     except ConfigError as exc:
         print(f"swarmloc: error: {exc}", file=sys.stderr)

@@ -112,7 +112,7 @@ BAD = {
                         r"group 'g' key 'seed': seeds come from the spec's 'seed'"),
     "replay algorithm": (('name = "bad"\nfamily = "replay"\n[[group]]\nname = "g"\n'
                           'scenarios = ["mrclam6"]\n[group.grid]\nalgorithm = ["ekf", "ekff"]\n'),
-                         r"setting 'g/mrclam6/algorithm=ekff'.*unknown 'ekff'"),
+                         r"setting 'g/mrclam6/algorithm=ekff'.*unknown algorithm 'ekff'; did you mean 'ekf'.*--plugin"),
     "replay scenario of another family": (
         'name = "bad"\nfamily = "replay"\n[[group]]\nname = "g"\nscenarios = ["ES1"]\n',
         r"scenario 'ES1' is a foraging scenario, not a replay scenario"),

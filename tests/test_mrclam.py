@@ -567,3 +567,24 @@ def test_cli_runs_and_rejects_a_bad_folder(folder, tmp_path, capsys):
     assert "no such folder" in capsys.readouterr().err
     assert main(["mrclam", str(folder), "--param", "gate_chi2=\"x\""]) == 2
     assert "gate_chi2" in capsys.readouterr().err
+
+
+def test_cli_takes_a_plugins_localizer_by_name(folder, tmp_path):
+    # Issue 48: `--algorithm` had argparse choices fixed before plugins load, so a plugin's
+    # localizer was refused ("invalid choice"). A subprocess: the plugin stays out of this one.
+    import subprocess
+    import sys
+
+    plugin = tmp_path / "dr_plugin.py"
+    plugin.write_text(
+        "from swarmloc.agents.replay.localizers import ALGORITHMS, Algorithm, build_localizer\n"
+        "ALGORITHMS.register(Algorithm('dr_plugin', 'dead reckoning from a plugin',\n"
+        "                              lambda setup, rng, params: build_localizer('dr', setup, rng, params)))\n")
+    base = [sys.executable, "-m", "swarmloc", "mrclam", str(folder), "--duration-s", "3"]
+    done = subprocess.run([*base, "--algorithm", "dr_plugin", "--plugin", str(plugin)],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert "dr_plugin" in done.stdout
+    # without --plugin: refused, saying a plugin may be missing (and not only "did you mean 'dr'")
+    done = subprocess.run([*base, "--algorithm", "dr_plugin"], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 2 and "--plugin" in done.stderr and "dr_plugin" in done.stderr

@@ -64,10 +64,33 @@ class Strategy:
     central: str | None = None
 
 
+#: What the compiled brain implements (agents/epuck/kernels.py): a strategy combines these.
+GAINS = ("none", "kalman", "fermi")
+CONFIDENCES = ("distance", "covariance")
+CENTRALS = (None, "system", "boards")
+
+
+def check_strategy(name: str, strategy: Strategy) -> None:
+    """Refuse, at registration, a strategy the engines could not run (ValueError naming the
+    field and the valid values): ``Strategy(gain="ci")`` would otherwise register and then fail
+    inside the first tick."""
+    if not isinstance(strategy, Strategy):
+        raise ValueError(f"expected a Strategy, got {type(strategy).__name__}")
+    if strategy.name != name:
+        raise ValueError(f"registered as {name!r} but named {strategy.name!r}")
+    for field, value, valid in (("gain", strategy.gain, GAINS), ("confidence", strategy.confidence, CONFIDENCES),
+                                ("central", strategy.central, CENTRALS)):
+        if value not in valid:
+            raise ValueError(f"{field}: {value!r} is not one the compiled brain implements "
+                             f"(valid: {', '.join(map(repr, valid))})")
+    if strategy.communicates and strategy.gain == "none":
+        raise ValueError("gain: a strategy that communicates needs a gain ('kalman' or 'fermi')")
+
+
 #: The registry of strategies, by the names the papers use. A strategy combines the built-in
-#: gains and confidences that the compiled brain implements (a new fusion rule of its own is a
-#: new brain: docs/extending.md).
-STRATEGIES: Registry[Strategy] = Registry("strategy")
+#: gains and confidences that the compiled brain implements (:func:`check_strategy` refuses
+#: others at registration; a new fusion rule of its own is a new brain: docs/extending.md).
+STRATEGIES: Registry[Strategy] = Registry("strategy", check_strategy)
 for _s in (
         Strategy("NC", communicates=False, double=False, gain="none"),
         Strategy("SSGIKF", communicates=True, double=False, gain="kalman"),
@@ -79,7 +102,7 @@ for _s in (
         Strategy("GLOBAL", communicates=False, double=False, gain="none", central="system"),
         Strategy("GLOBAL_RB", communicates=False, double=False, gain="none", central="boards"),
 ):
-    STRATEGIES.register(_s.name, _s)
+    STRATEGIES.register(_s)
 
 
 def kalman_gain(p_own: np.ndarray, p_other: np.ndarray) -> np.ndarray:

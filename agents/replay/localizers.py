@@ -843,7 +843,7 @@ ALGORITHMS: Registry[Algorithm] = Registry("algorithm")
 
 def register(algorithm: Algorithm) -> None:
     """Add an algorithm to :data:`ALGORITHMS`; a second one with the same name is an error."""
-    ALGORITHMS.register(algorithm.name, algorithm)
+    ALGORITHMS.register(algorithm)
 
 
 def build_localizer(name: str, setup: LandmarkSetup, rng: np.random.Generator,

@@ -26,7 +26,7 @@ import importlib
 import importlib.util
 import os
 import sys
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from importlib.metadata import entry_points
 from pathlib import Path
 from typing import Any, Generic, TypeVar
@@ -51,25 +51,73 @@ def resolve(target: Any) -> Any:
     return obj
 
 
+_MISSING = object()
+
+
+def _caller() -> str:
+    """``file:line`` of the code that called into this module (a registration's origin)."""
+    frame = sys._getframe(1)
+    here = __file__
+    while frame is not None and frame.f_code.co_filename == here:
+        frame = frame.f_back
+    return f"{frame.f_code.co_filename}:{frame.f_lineno}" if frame is not None else "?"
+
+
+def plugin_hint() -> str:
+    """What an unknown name may mean: a plugin that was not loaded, and which ones were."""
+    loaded = ", ".join(sorted(_loaded)) or "none"
+    return (f"not registered: if it comes from a plugin, did you forget --plugin FILE_OR_MODULE "
+            f"(or {PLUGINS_ENV})? plugins loaded: {loaded}")
+
+
 class Registry(Generic[T]):
-    """Entries of one kind, by name. ``kind`` names them in errors ("strategy", "algorithm")."""
+    """Entries of one kind, by name. ``kind`` names them in errors ("strategy", "algorithm");
+    ``check(name, entry)``, if given, is run at registration and raises ValueError for an entry
+    the engines could not run (a strategy with a gain no kernel has), so that a mistake shows
+    where it is made, not in the middle of a run."""
 
-    def __init__(self, kind: str) -> None:
+    def __init__(self, kind: str, check: Callable[[str, T], None] | None = None) -> None:
         self.kind = kind
+        self._check = check
         self._entries: dict[str, T] = {}
+        self._origins: dict[str, str] = {}
 
-    def register(self, name: str, entry: T) -> T:
-        """Add ``entry`` as ``name``; ValueError if the name is taken. Returns the entry."""
+    def register(self, name_or_entry: Any, entry: Any = _MISSING) -> T:
+        """Add an entry: ``register(entry)`` takes the name from ``entry.name``,
+        ``register(name, entry)`` gives it. ValueError if the name is taken (naming the file
+        and line of both registrations) or the registry's check refuses the entry. Returns the
+        entry."""
+        if entry is _MISSING:
+            entry = name_or_entry
+            name = getattr(entry, "name", None)
+            if not isinstance(name, str):
+                raise ValueError(f"{self.kind}: register(entry) needs an entry with a 'name'; "
+                                 f"else register(name, entry), got {entry!r}")
+        else:
+            name = name_or_entry
         if not isinstance(name, str) or not name:
             raise ValueError(f"{self.kind} name: expected a non-empty string, got {name!r}")
+        origin = _caller()
         if name in self._entries:
-            raise ValueError(f"{self.kind} {name!r} is already registered")
+            raise ValueError(f"{self.kind} {name!r} is already registered (at {self._origins[name]}); "
+                             f"registered again at {origin}")
+        if self._check is not None:
+            try:
+                self._check(name, entry)
+            except ValueError as exc:
+                raise ValueError(f"{self.kind} {name!r} (registered at {origin}): {exc}") from None
         self._entries[name] = entry
+        self._origins[name] = origin
         return entry
+
+    def origin(self, name: str) -> str:
+        """``file:line`` where ``name`` was registered."""
+        return self._origins[name]
 
     def unregister(self, name: str) -> None:
         """Remove ``name`` (tests that register a temporary entry)."""
         self._entries.pop(name, None)
+        self._origins.pop(name, None)
 
     def get(self, name: str) -> T:
         """The entry of ``name``; ValueError naming the closest registered names if unknown."""
@@ -79,7 +127,7 @@ class Registry(Generic[T]):
             close = difflib.get_close_matches(str(name), list(self._entries), n=1, cutoff=0.4)
             hint = f"; did you mean '{close[0]}'?" if close else ""
             raise ValueError(f"unknown {self.kind} {name!r}{hint} "
-                             f"(known: {', '.join(self._entries)})") from None
+                             f"(known: {', '.join(self._entries)}); {plugin_hint()}") from None
 
     def load(self, name: str) -> Any:
         """The entry of ``name`` with a ``"module:attribute"`` path imported."""
