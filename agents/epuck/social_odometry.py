@@ -75,7 +75,8 @@ def check_strategy(name: str, strategy: Strategy) -> None:
     field and the valid values): ``Strategy(gain="ci")`` would otherwise register and then fail
     inside the first tick."""
     if not isinstance(strategy, Strategy):
-        raise ValueError(f"expected a Strategy, got {type(strategy).__name__}")
+        raise ValueError(  # noqa: TRY004 -- the registry's contract is ValueError
+            f"expected a Strategy, got {type(strategy).__name__}")
     if strategy.name != name:
         raise ValueError(f"registered as {name!r} but named {strategy.name!r}")
     for field, value, valid in (("gain", strategy.gain, GAINS), ("confidence", strategy.confidence, CONFIDENCES),
