@@ -104,9 +104,14 @@ def _run_name(p: argparse.ArgumentParser, required: bool = False) -> None:
                    help="run name: the key prefix swarmloc/<run>/ that keeps runs apart")
 
 
-def _compile_kernels() -> None:
+def _compile_kernels(family: str | None = None) -> None:
     """Compile the kernels if this machine's cache lacks them (deploy/warm.py), saying so on
-    stderr; a few milliseconds when the cache is warm."""
+    stderr; a few milliseconds when the cache is warm. Nothing for a family that runs none
+    (``Family.compiled_kernels``); ``None``: the family is not known yet, compile."""
+    from swarmloc.families import needs_kernels
+
+    if not needs_kernels(family):
+        return
     from swarmloc.deploy.warm import ensure_compiled
 
     ensure_compiled(lambda line: print(f"swarmloc: {line}", file=sys.stderr, flush=True))
@@ -160,7 +165,7 @@ def main_world(args) -> int:
     scenario = load_from_args(args, any_family=True)
     keys = Keys(args.run)
     stop = _install_stop()
-    _compile_kernels()  # before the join queryable: the join timeout never races a compiler
+    _compile_kernels(scenario.family)  # before the join queryable: the join timeout never races a compiler
     out = Path(args.out) if args.out else None
     if out:
         out.mkdir(parents=True, exist_ok=True)
@@ -215,7 +220,7 @@ def main_agent(args) -> int:
     stop = _install_stop()
     if args.nice:
         os.nice(args.nice)
-    _compile_kernels()  # before joining: a joined agent is ready to answer its first Sense
+    _compile_kernels(args.family)  # before joining: a joined agent is ready to answer its first Sense
     return serve_agent(args, stop)
 
 
@@ -319,6 +324,10 @@ def _agent_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--nice", type=int, default=0, choices=range(20), metavar="0..19",
                    help="lower this agent's CPU priority: on a machine with fewer cores than agents, "
                         "the world-server (the lockstep's serial part) then runs first")
+    p.add_argument("--family", default=None, metavar="NAME",
+                   help="the robot family the world serves, if known (swarmloc run passes it): "
+                        "an agent of a family without compiled kernels skips compiling them "
+                        "(default: compile them, as an e-puck agent needs)")
     p.add_argument("--null-brain", action="store_true",
                    help="transport benchmark: answer each Sense with a standstill Act instead of "
                         "running the brain (e-puck scenarios)")

@@ -122,8 +122,9 @@ def start_swarm(sup: Supervisor, scenario_file: Path, *, run: str, robots: int, 
                            env={"ZENOH_RUNTIME": ONE_THREAD_ZENOH_RUNTIME})
         agents = ForkedAgents(server, list(range(robots))).wait_forked(join_timeout_s)
     else:
-        agents = [sup.start(["agent", "--robot", str(i), *common], log_path=log_dir / f"agent-{i}.log")
-                  for i in range(robots)]
+        family = family_of(scenario_data(str(scenario_file)))
+        agents = [sup.start(["agent", "--robot", str(i), "--family", family, *common],
+                            log_path=log_dir / f"agent-{i}.log") for i in range(robots)]
     return LocalSwarm(endpoint, world, world_endpoint, agents)
 
 
@@ -206,9 +207,11 @@ def run_local(scenario: AnyScenario, *, run_name: str | None, out_root: Path, re
     # Compile the kernels in this one process before any piece starts (deploy/warm.py): left
     # to the pieces, a cold machine's world and agents compiled them all at once.
     from swarmloc.deploy.warm import ensure_compiled
+    from swarmloc.families import needs_kernels
 
     # Said even with --quiet (which only drops the progress bar): it explains a minute's wait.
-    ensure_compiled(lambda line: print(line, file=sys.stderr, flush=True))
+    if needs_kernels(scenario.family):
+        ensure_compiled(lambda line: print(line, file=sys.stderr, flush=True))
     with supervised() as sup:
         from swarmloc.deploy.observe.cli import record_world_args, start_view
 

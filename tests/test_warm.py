@@ -128,6 +128,24 @@ def test_default_run_from_an_empty_kernel_cache_completes_with_the_warm_runs_met
 
 
 @pytest.mark.integration
+def test_a_family_without_kernels_runs_from_an_empty_cache_without_compiling_them(tmp_path):
+    # Issue 48: a laser run compiled the e-puck kernels it never calls (79 of its first 91 s).
+    # Family.compiled_kernels says which families run them; the launcher, the world and the
+    # agents (told the family by the launcher) skip compiling for the others.
+    cache = tmp_path / "numba"
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(cache)}
+    out = tmp_path / "runs"
+    done = run_swarmloc(["run", "laser-collab-three-rooms", "--set", "world.steps=30", "--out", str(out),
+                         "--run", "laser"], env=env, cwd=tmp_path, timeout_s=300)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert "compiling kernels" not in done.stderr
+    for log in (out / "laser" / "logs").iterdir():
+        assert "compiling kernels" not in log.read_text(), log
+    assert not _cache_files(cache) and not is_warm(cache)
+    assert json.loads((out / "laser" / "results.json").read_text())["metrics"]["steps"] == 30
+
+
+@pytest.mark.integration
 def test_a_non_editable_install_warms_once_and_runs_from_another_folder(tmp_path):
     venv = tmp_path / "venv"
     subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True, timeout=120)

@@ -29,7 +29,10 @@ class Family:
     - ``flags``: what the common command-line flags (``--robots``, ``--seed``, ...) set in the
       family's scenario;
     - ``seeded_world``: the run seed reaches the world's Senses (False for a replay of recorded
-      data, where only the brains' generators take it).
+      data, where only the brains' generators take it);
+    - ``compiled_kernels``: its world or brains run swarmloc's numba kernels (deploy/warm.py), so
+      a run compiles them first, once per machine; a family without them starts at once (a
+      laser run compiled the e-puck kernels it never calls: 79 of its first 91 s, issue 48).
     """
 
     scenario: object
@@ -37,6 +40,14 @@ class Family:
     brain: object
     flags: dict = field(default_factory=dict)
     seeded_world: bool = True
+    compiled_kernels: bool = False
+
+
+def needs_kernels(family: str | None) -> bool:
+    """Whether a run of ``family`` compiles the kernels first (None, unknown: yes, as before)."""
+    if family is None or family not in FAMILIES:
+        return True
+    return FAMILIES.get(family).compiled_kernels
 
 
 FAMILIES: Registry[Family] = Registry("robot family")
@@ -46,7 +57,7 @@ FAMILIES.register("foraging", Family(
     world="swarmloc.world.epuck.service:_foraging",
     brain="swarmloc.agents.epuck.agent:ForagingAgent.from_welcome",
     flags={"robots": "world.robots", "strategy": "agent.strategy", "beta": "agent.beta",
-           "seed": "world.seed", "duration_s": "world.duration_s"}))
+           "seed": "world.seed", "duration_s": "world.duration_s"}, compiled_kernels=True))
 FAMILIES.register("laser", Family(
     scenario="swarmloc.deploy.lab.laser.runner:LaserScenario",
     world="swarmloc.world.laser.service:LaserService",
