@@ -96,6 +96,8 @@ class _Broken:
     def step(self, obs) -> None:
         if self.flaw == "raises on bad payloads" and any(m.payload.startswith(b"\xc1") for m in obs.received):
             raise ValueError("cannot parse")
+        if self.flaw == "writes its observation":
+            obs.ranges_m[0] = 0.0  # the experiment's world shares this array: read-only everywhere
 
     def estimate(self) -> np.ndarray:
         if self.flaw == "global random state":
@@ -117,15 +119,18 @@ def broken():
         ALGORITHMS.unregister("broken")
 
 
-@pytest.mark.parametrize(("flaw", "named"), [
-    ("global random state", "determinism"),
-    ("not finite", "types"),
-    ("raises on bad payloads", "bad input"),
+@pytest.mark.parametrize(("flaw", "named", "says"), [
+    ("global random state", "determinism", r"global random state \(np\.random"),
+    ("not finite", "types", ""),
+    ("raises on bad payloads", "bad input", r"cannot parse at .*test_checker\.py:\d+ in step"),
+    ("writes its observation", "types", r"read-only at .*test_checker\.py:\d+ in step"),
 ])
-def test_a_broken_localizer_is_caught_naming_the_check(broken, flaw, named):
+def test_a_broken_localizer_is_caught_naming_the_check(broken, flaw, named, says):
+    # Issue 48: the check names the check, the cause where it is known (the global random
+    # state), and the file and line of the localizer that raised.
     scenario = load_any("laser-collab-three-rooms", {"seed": 1, "algorithm": "broken"},
                         [f'algorithm.params={{flaw = "{flaw}"}}'])
-    with pytest.raises(CheckError, match=f"^{named}:"):
+    with pytest.raises(CheckError, match=f"^{named}:.*{says}"):
         check(scenario, ticks=TICKS, pure=False)
 
 

@@ -54,7 +54,10 @@ class RadioMessage:
 
 @dataclass(frozen=True)
 class LaserObservation:
-    """What one laser robot gets at one step."""
+    """What one laser robot gets at one step. ``ranges_m`` is read-only on every path (the
+    in-process world shares one array among its observations; an agent process builds its
+    own): a localizer that writes into it fails at once, in ``swarmloc check`` as in an
+    experiment (issue 48: it passed ``check`` and ``run``, then failed the experiment)."""
 
     step: int
     odometry_delta_s_m: float
@@ -62,6 +65,10 @@ class LaserObservation:
     ranges_m: np.ndarray  #: (L,) laser ranges, beam j at heading + j * 2 pi / L
     sightings: tuple[Sighting, ...] = ()
     received: tuple[RadioMessage, ...] = ()
+
+    def __post_init__(self) -> None:
+        if isinstance(self.ranges_m, np.ndarray):
+            self.ranges_m.flags.writeable = False
 
 
 @dataclass(frozen=True)

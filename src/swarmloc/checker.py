@@ -65,6 +65,24 @@ def _fail(check_name: str, message: str) -> CheckError:
     return CheckError(f"{check_name}: {message}")
 
 
+def _where(exc: BaseException) -> str:
+    """`` at FILE:LINE in FUNCTION``: where ``exc`` was raised (its innermost frame), so that a
+    failed check points at the line of the brain or localizer that broke, not at the checker."""
+    tb = exc.__traceback__
+    while tb is not None and tb.tb_next is not None:
+        tb = tb.tb_next
+    if tb is None:
+        return ""
+    code = tb.tb_frame.f_code
+    return f" at {code.co_filename}:{tb.tb_lineno} in {code.co_name}"
+
+
+#: What a determinism failure most often is, said with it.
+DETERMINISM_HINT = ("a brain or world that draws from the global random state (np.random.*, "
+                    "random.*) or reads the clock is not reproducible: draw from the generator "
+                    "its setup is given (rng), seeded from the run seed and the robot id")
+
+
 def _welcome(scenario, robot_id: int):
     from swarmloc.protocol.messages import Welcome
 
@@ -110,6 +128,7 @@ def _run(scenario, ticks: int, corrupt: bool = False) -> dict:
             except Exception as exc:
                 what = "bad input" if corrupt else "types"
                 raise _fail(what, f"tick {tick}, robot {rid}: act() raised {type(exc).__name__}: {exc}"
+                            f"{_where(exc)}"
                             + (" on a Sense with a garbage teammate payload" if corrupt else "")) from exc
             if not isinstance(act, world.act_type):
                 raise _fail("types", f"tick {tick}, robot {rid}: act() returned {type(act).__name__}, "
@@ -220,7 +239,7 @@ def check(scenario, *, ticks: int = 30, batch: bool = True, pure: bool = True) -
         for k, (a, b) in enumerate(zip(first[name], again[name], strict=True)):
             if a != b:
                 raise _fail("determinism", f"message {k} of the {name} differs between two runs "
-                                           f"of seed {scenario.seed}")
+                                           f"of seed {scenario.seed}: {DETERMINISM_HINT}")
     from swarmloc.families import FAMILIES
 
     other = _run(_with(scenario, "seed", scenario.seed + 1), ticks)
