@@ -328,6 +328,9 @@ TEMPLATES.register("epuck", "swarmloc.deploy.lab.epuck.report:TEMPLATE")
 TEMPLATES.register("laser", "swarmloc.deploy.lab.laser.report:TEMPLATE")
 TEMPLATES.register("vision", "swarmloc.deploy.lab.vision.report:TEMPLATE")
 TEMPLATES.register("replay", "swarmloc.deploy.lab.replay.report:TEMPLATE")
+#: Any spec's results, read as they are (a user's own experiment): deploy/lab/generic_report.py.
+GENERIC = "generic"
+TEMPLATES.register(GENERIC, "swarmloc.deploy.lab.generic_report:TEMPLATE")
 #: The family of a file nothing else tells (its template's loader names what is missing).
 DEFAULT_FAMILY = "epuck"
 
@@ -362,7 +365,7 @@ def results_family(paths: Sequence[Path], family: str | None = None) -> str:
             families.add(load_spec(name).family)
         if not families:
             families = {name for name in TEMPLATES
-                        if TEMPLATES.load(name).columns <= set(header)}
+                        if name != GENERIC and TEMPLATES.load(name).columns <= set(header)}
         if len(families) > 1:
             raise ConfigError(f"{path}: rows of families {', '.join(sorted(families))}; "
                               f"give --family or one file per family")
@@ -386,7 +389,22 @@ def main_report(args) -> int:
     page = template.write(paths, args)
     out = page.parent
     print(f"wrote {page} ({name} report, {len(sorted(out.glob('*.png')))} figures in {out})")
+    if name != GENERIC and not _shipped_experiments(paths):
+        # A spec of one's own: the family's page compares with the papers' figures, which it
+        # may not reproduce; the generic page tables whatever its settings measured.
+        print(f"note: no shipped spec made these rows; for the comparison of every setting's "
+              f"metrics, read from the rows: swarmloc report {' '.join(map(str, paths))} --family "
+              f"{GENERIC} --out DIR", file=sys.stderr)
     return 0
+
+
+def _shipped_experiments(paths: Sequence[Path]) -> set[str]:
+    from swarmloc.deploy.lab.experiment import shipped_specs
+
+    found: set[str] = set()
+    for path in paths:
+        found |= _header_and_experiments(Path(path))[1]
+    return found & set(shipped_specs())
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
@@ -402,7 +420,8 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                    help="folder for the page and the figures (default: the family's, e.g. "
                         "docs/<experiment>/, docs/laser, docs/vision, docs/mrclam)")
     p.add_argument("--family", default=None, metavar="FAMILY",
-                   help="the results' family (default: told by the results)")
+                   help="the results' family (default: told by the results); 'generic': the "
+                        "comparison page of any spec's rows (a spec of one's own)")
     p.add_argument("--title", default=None, help="e-puck: title of the page")
     p.add_argument("--page", default="README.md", help="e-puck: file name of the page")
     p.add_argument("--reasons", default=None, metavar="FILE",
