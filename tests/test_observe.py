@@ -266,15 +266,27 @@ def test_truncated_recording_keeps_its_whole_messages(small_recording, tmp_path)
     assert rec.frames == whole.frames[: len(rec.frames)], "every whole message up to the cut"
 
 
-@pytest.mark.parametrize("mangle, expect", [
-    (lambda d: b"PNG\x89" + d[4:], "not an MCAP file"),
-    (lambda d: b"", "not an MCAP file"),
-    (lambda d: d[:20], "no /swarmloc/frame channel"),
-    (lambda d: d.replace(b'"bounds_m":[', b'"bounds_m"![', 1), "not valid json"),
+@pytest.fixture(scope="module")
+def unchunked_recording(small_recording, tmp_path_factory) -> Path:
+    """The small recording in the layout before issue 44 (one record per message, no
+    compression): a file of an earlier version, and one whose JSON can be spoilt byte-wise."""
+    from swarmloc.deploy.observe.record import rewrite
+
+    path = tmp_path_factory.mktemp("rec") / "unchunked.mcap"
+    rewrite(small_recording, path, chunked=False)
+    return path
+
+
+@pytest.mark.parametrize("mangle, expect, layout", [
+    (lambda d: b"PNG\x89" + d[4:], "not an MCAP file", "chunked"),
+    (lambda d: b"", "not an MCAP file", "chunked"),
+    (lambda d: d[:20], "no /swarmloc/frame channel", "chunked"),
+    (lambda d: d.replace(b'"bounds_m":[', b'"bounds_m"![', 1), "not valid json", "unchunked"),
 ])
-def test_corrupt_recording_is_named(small_recording, tmp_path, mangle, expect):
+def test_corrupt_recording_is_named(small_recording, unchunked_recording, tmp_path, mangle, expect, layout):
+    source = small_recording if layout == "chunked" else unchunked_recording
     bad = tmp_path / "bad.mcap"
-    bad.write_bytes(mangle(small_recording.read_bytes()))
+    bad.write_bytes(mangle(source.read_bytes()))
     with pytest.raises(RecordingError, match=expect):
         read_recording(bad)
     proc = subprocess.run(["swarmloc", "view", str(bad), "--http", "127.0.0.1:0"],

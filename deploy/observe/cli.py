@@ -200,6 +200,15 @@ def main_view(args) -> int:
 # -- swarmloc record ---------------------------------------------------------------------------
 
 def main_record(args) -> int:
+    if args.recover is not None:
+        from swarmloc.deploy.observe.record import rewrite
+
+        rec = rewrite(args.recover, args.file)
+        lost = f"; {rec.truncated}" if rec.truncated else "; the input was whole"
+        print(f"wrote {args.file}: {len(rec.frames)} frames, {len(rec.sense_act)} Senses and Acts{lost}")
+        return 0
+    if args.run is None:
+        return _fail("record: give --run RUN (a live run to record) or --recover IN.mcap")
     import msgpack
 
     from swarmloc.deploy.observe.record import RecordingWriter
@@ -339,9 +348,13 @@ def add_parsers(sub) -> None:
                        description="A standalone observer: records the frames it receives (at most "
                                    "the world's --frame-hz per second, not every tick; for every "
                                    "tick use `swarmloc run/world --record`). Stops at the run's end "
-                                   "or on Ctrl-C.")
+                                   "or on Ctrl-C. With --recover IN: rewrite a recording cut short "
+                                   "(a crash) as a complete indexed file FILE.mcap.")
     p.add_argument("file", metavar="FILE.mcap")
-    p.add_argument("--run", required=True, help="the run to record")
+    p.add_argument("--run", default=None, help="the run to record")
+    p.add_argument("--recover", default=None, metavar="IN.mcap",
+                   help="instead of recording: read IN.mcap up to its last whole chunk and write "
+                        "what it holds to FILE.mcap, indexed (as `mcap recover` does)")
     p.add_argument("--timeout-s", type=float, default=60.0, help="how long to wait for the world")
     add_transport_args(p)
     p.set_defaults(func=main_record)

@@ -17,11 +17,17 @@ Channels of a swarmloc recording :
 
 Log times are *simulated* time (tick x tick length), so a player's clock is the run's clock.
 
-The file is written without chunks: every message is one top-level record, so a file cut short
-(a crash, a full disk) still reads up to its last whole message, and writing costs no
-compression. :func:`read_recording` reads it front to back and names what is wrong: not an MCAP
-file, a record cut short (the messages before it are kept), a channel with the wrong schema, a
-message that is not the JSON its schema says.
+The file is indexed (issue 44): messages go into lz4-compressed chunks, each closed and written
+out after ``CHUNK_S`` of simulated time (:meth:`RecordingWriter.frame`), with message indexes
+after each chunk and a summary (chunk indexes, statistics) at the end, so that Foxglove,
+Lichtblick and the mcap readers seek in it instead of reading it whole (unchunked, as before
+issue 44, the TypeScript ``@mcap/core`` indexed reader found no chunk index and read no
+message). A file cut short (a crash, a full disk) loses at most the chunk in progress: it still
+reads up to its last whole chunk, and ``swarmloc record --recover IN OUT`` rewrites what it
+holds as an indexed file. :func:`read_recording` reads it front to back and names what is wrong:
+not an MCAP file, a record cut short (the messages before it are kept), a channel with the wrong
+schema, a message that is not the JSON its schema says. Unchunked files of earlier versions read
+alike.
 """
 
 from __future__ import annotations
@@ -44,6 +50,8 @@ SAMPLES_TOPIC = "/foxglove/samples"
 SENSE_TOPIC = "/swarmloc/sense"
 ACT_TOPIC = "/swarmloc/act"
 PROFILE = "swarmloc"
+#: The first bytes of every MCAP file.
+MCAP_MAGIC = b"\x89MCAP0\r\n"
 MSGPACK = "swarmloc-msgpack"
 
 
@@ -122,6 +130,10 @@ TOPIC_ENCODINGS = {SCENE_TOPIC: "json", FRAME_TOPIC: "msgpack", **dict.fromkeys(
 #: Foxglove's scene is for the eye: at most one per FOXGLOVE_PERIOD_S of simulated time.
 FOXGLOVE_PERIOD_S = 0.5
 WRITE_BUFFER_BYTES = 1 << 18
+#: Simulated seconds per chunk: what a crash may lose, and the unit a reader seeks by.
+CHUNK_S = 1.0
+#: A chunk is also closed when its messages pass this size (a very large swarm's second).
+CHUNK_BYTES = 8 << 20
 
 
 # -- Foxglove scene ----------------------------------------------------------------------------
@@ -256,7 +268,7 @@ class RecordingWriter:
     ``messages``, :meth:`sense` / :meth:`act` with the protocol's bytes)."""
 
     def __init__(self, path: str | Path, *, messages: bool = False, foxglove: bool = True,
-                 metadata: dict | None = None) -> None:
+                 metadata: dict | None = None, chunked: bool = True) -> None:
         self.path = Path(path)
         # A large buffer: one system call per quarter megabyte, not per message (a write per
         # message cost 95 us here). A crash loses at most that tail; the rest reads as whole messages.
@@ -264,8 +276,15 @@ class RecordingWriter:
         from mcap.writer import CompressionType, Writer  # only when recording: a world without
         # --record never imports mcap (it would add 0.1 s to its start)
 
-        self._w = Writer(self._file, use_chunking=False, compression=CompressionType.NONE,
+        # chunked=False: the layout before issue 44 (one top-level record per message), kept for
+        # benchmarks/bench_record.py's comparison.
+        # lz4, not zstd: at 100 robots zstd made files 25 % smaller than lz4 but cost the writer
+        # 1.2-1.3x the unchunked one's time per tick, lz4 1.1x (benchmarks/bench_record.py).
+        self._w = Writer(self._file, use_chunking=chunked, chunk_size=CHUNK_BYTES,
+                         compression=CompressionType.LZ4 if chunked else CompressionType.NONE,
                          enable_crcs=True)
+        self.chunked = chunked
+        self._next_chunk_ns = 0
         self._w.start(profile=PROFILE, library="swarmloc")
         ids = {name: self._w.register_schema(name=name, encoding="jsonschema", data=dumps(schema))
                for name, schema in SCHEMAS.items()}
@@ -300,6 +319,10 @@ class RecordingWriter:
 
     def frame(self, frame: dict) -> None:
         t = frame["tick"] * self.tick_ns
+        if self.chunked and t >= self._next_chunk_ns:
+            # close the chunk of the last CHUNK_S and write it out: a crash loses at most this
+            self._next_chunk_ns = t + round(CHUNK_S * 1e9)
+            self._w.flush()
         self._add(FRAME_TOPIC, t, self._pack(frame))
         if self.foxglove and t >= self._next_foxglove_ns:
             self._next_foxglove_ns = t + round(FOXGLOVE_PERIOD_S * 1e9)
@@ -442,6 +465,10 @@ def read_recording(path: str | Path, *, keep_messages: bool = False) -> Recordin
                                  f"{counting.offset} of {size}") from None
         except EndOfFile:
             if n == 0 and not schemas:
+                raw.seek(0)
+                if raw.read(len(MCAP_MAGIC)) == MCAP_MAGIC:
+                    raise RecordingError(f"{path}: cut short at byte {size}, before its first whole "
+                                         f"chunk: no frame to read") from None
                 raise RecordingError(f"{path}: not an MCAP file: it ends at byte {size}, before "
                                      f"its first record") from None
             rec.truncated = (f"{path}: truncated at byte {size}: the file ends inside a record; "
@@ -462,6 +489,35 @@ def read_recording(path: str | Path, *, keep_messages: bool = False) -> Recordin
                              + (f" ({rec.truncated})" if rec.truncated else ""))
     if rec.scene is None:
         raise RecordingError(f"{path}: no scene message on {SCENE_TOPIC}")
+    return rec
+
+
+def rewrite(src: str | Path, dst: str | Path, *, chunked: bool = True) -> Recording:
+    """``swarmloc record --recover SRC DST``: read ``src`` as far as it is whole (a file cut
+    short by a crash keeps every chunk before the cut) and write what it holds to ``dst`` as a
+    complete indexed file: the scene, every frame (the Foxglove channels made again from them),
+    every Sense and Act. Returns what was read (``truncated`` says what was lost). ``chunked``
+    False writes the layout before issue 44 (one record per message)."""
+    rec = read_recording(src, keep_messages=True)
+    if Path(dst).resolve() == Path(src).resolve():
+        raise RecordingError(f"{dst}: the output must be another file than the input")
+    writer = RecordingWriter(dst, messages=bool(rec.sense_act), foxglove=FOXGLOVE_TOPIC in rec.topics,
+                             metadata={"recovered_from": str(src)}, chunked=chunked)
+    try:
+        writer.scene(rec.scene)
+        pending = sorted(rec.sense_act, key=lambda m: m[1])
+        k = 0
+        for frame in rec.frames:
+            t = frame["tick"] * writer.tick_ns
+            while k < len(pending) and pending[k][1] <= t:
+                topic, log_ns, data = pending[k]
+                writer._add(topic, log_ns, data)
+                k += 1
+            writer.frame(frame)
+        for topic, log_ns, data in pending[k:]:
+            writer._add(topic, log_ns, data)
+    finally:
+        writer.close()
     return rec
 
 
