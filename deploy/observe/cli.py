@@ -197,6 +197,20 @@ def main_view(args) -> int:
     return 0
 
 
+# -- swarmloc export ---------------------------------------------------------------------------
+
+def main_export(args) -> int:
+    try:
+        import rosbags  # noqa: F401 -- only to say what is missing
+    except ImportError:
+        return _fail("export --to rosbag2 needs the rosbags package: pip install 'swarmloc[ros]'")
+    from swarmloc.deploy.observe.rosbag import export_rosbag2
+
+    counts = export_rosbag2(args.file, args.out)
+    print(f"wrote {args.out}: " + ", ".join(f"{t} {n}" for t, n in counts.items()))
+    return 0
+
+
 # -- swarmloc record ---------------------------------------------------------------------------
 
 def main_record(args) -> int:
@@ -358,6 +372,17 @@ def add_parsers(sub) -> None:
     p.add_argument("--timeout-s", type=float, default=60.0, help="how long to wait for the world")
     add_transport_args(p)
     p.set_defaults(func=main_record)
+
+    p = sub.add_parser("export", help="write a recording in another format (a ROS 2 bag)",
+                       description="Write FILE.mcap (a swarmloc recording) as a rosbag2 folder OUT "
+                                   "(MCAP storage, CDR, standard ROS 2 message types: /tf, "
+                                   "/robot_<i>/odom, /swarmloc/estimates, /swarmloc/arena; "
+                                   "docs/recording.md). Needs the rosbags package "
+                                   "(pip install 'swarmloc[ros]'), no ROS installation.")
+    p.add_argument("file", metavar="FILE.mcap")
+    p.add_argument("--to", required=True, choices=["rosbag2"], help="the format")
+    p.add_argument("out", metavar="OUT", help="the folder to write (must not exist)")
+    p.set_defaults(func=main_export)
 
     p = sub.add_parser("replay", help="republish a recording on Zenoh as if live",
                        description="Publish a recording's world states, frames, scene, liveliness "
