@@ -79,3 +79,50 @@ def test_worker_killed_mid_run_leaves_every_row_exactly_once(tmp_path):
     local = tmp_path / "again.csv"
     run_experiment(load_spec(spec_path), local, workers=2, progress=False)
     assert model_columns(read_rows(out)) == model_columns(read_rows(local))
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = (Path("/proc") / str(pid) / "stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"
+
+
+def test_a_sigkilled_experiment_leaves_no_worker_behind(tmp_path):
+    # Issue 47: every SIGKILL of `swarmloc experiment` left its pool workers (and the resource
+    # tracker they kept alive) running as orphans. The workers now ask for SIGTERM when their
+    # parent dies (executors._init_worker).
+    import time
+
+    out = tmp_path / "rows.csv"
+    proc = subprocess.Popen([sys.executable, "-m", "swarmloc", "experiment", str(spec_file(tmp_path, 4, 300.0)),
+                             "--workers", "2", "--out", str(out)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+    seen: list[int] = []
+    try:
+        wait_for_rows(out, 1, proc)  # the pool is up and working
+        seen = _children(proc.pid)
+        helpers = [int(e.name) for e in Path("/proc").iterdir()
+                   if e.name.isdigit() and _parent(int(e.name)) == proc.pid]  # workers, resource tracker
+        assert len(seen) == 2, seen
+        proc.kill()
+        proc.wait(timeout=10)
+        end = time.monotonic() + 30
+        while time.monotonic() < end and any(_alive(p) for p in helpers):
+            time.sleep(0.05)  # polling for the kernel's signal to land; not a readiness guess
+        assert not [p for p in helpers if _alive(p)], "children of the killed experiment still run"
+    finally:
+        for pid in seen:
+            if _alive(pid):
+                os.kill(pid, signal.SIGKILL)
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.communicate(timeout=10)
+
+
+def _parent(pid: int) -> int:
+    try:
+        return int((Path("/proc") / str(pid) / "stat").read_text().rsplit(")", 1)[1].split()[1])
+    except (OSError, IndexError, ValueError):
+        return -1

@@ -115,9 +115,17 @@ class InlineExecutor:
 # -- the local pool ---------------------------------------------------------------------------
 
 
-def _ignore_sigint() -> None:
-    # Ctrl-C reaches the whole process group: the parent alone handles it and stops the workers.
+def _init_worker(parent_pid: int) -> None:
+    """Each pool worker, as it starts: Ctrl-C reaches the whole process group, so the parent
+    alone handles it and stops the workers; and the worker asks Linux for SIGTERM when the
+    parent dies, so that a SIGKILLed ``swarmloc experiment`` leaves no worker behind (issue 47:
+    two idle workers of ~190 MB each, and the resource tracker they kept alive, stayed as
+    orphans for good). A worker whose parent is already gone exits at once."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    from swarmloc.deploy.fork.server import die_with_parent
+
+    if not die_with_parent(signal.SIGTERM, parent_pid=parent_pid):
+        os._exit(1)
 
 
 @contextmanager
@@ -176,7 +184,7 @@ class LocalPool:
             if self._pool is None:
                 self._pool = ProcessPoolExecutor(max_workers=self._max,
                                                  mp_context=multiprocessing.get_context("spawn"),
-                                                 initializer=_ignore_sigint)
+                                                 initializer=_init_worker, initargs=(os.getpid(),))
             submitted = {self._pool.submit(fn, job): job for job in jobs}
         self._futures.update(submitted)
         return set(submitted)
