@@ -80,7 +80,23 @@ State: the pose ``(x_m, y_m, theta_rad)`` and its covariance ``P`` (3 x 3).
   localizing grows (robot 2 0.119 -> 0.128 m at 0.1 m): not made default. With
   ``fusion="sgikf"`` the reading becomes a position fix
   fused by social odometry's SGIKF (seed 000 eq. 18-22,
-  :func:`~swarmloc.agents.replay.localizers.sgikf_fuse`).
+  :func:`~swarmloc.agents.replay.localizers.sgikf_fuse`). With ``fusion="ci"`` (the algorithm
+  ``ekf-ci``: CoLo-AT's local-state covariance intersection, LS-CI, issue 46) the teammate's
+  estimate and the reading give a fix of this robot's position, fused by covariance
+  intersection instead of a Kalman update: correct whatever the unknown correlation between the
+  two estimates (S. J. Julier and J. K. Uhlmann, "A non-divergent estimation algorithm in the
+  presence of unknown correlations", ACC 1997; for cooperative localization, L. C. Carrillo-Arce,
+  E. D. Nerurkar, J. L. Gordillo and S. I. Roumeliotis, "Decentralized multi-robot cooperative
+  localization using covariance intersection", IROS 2013). CI fuses the position block
+  (:func:`ci_position_update`, ``w`` chosen to minimise the fused trace) and the rest of the
+  state follows by conditioning: no inflation or "only from better" guard is needed, so
+  ``teammate_inflation`` does not apply (the floor does). Ours: a position fix, as the EKF's
+  other teammate updates are; the papers' LS-CI fuses the teammate's whole relative pose.
+  Measured on Dataset 6, the first 600 s, seed 0, self-calibrated cameras (``swarmloc mrclam
+  DATA --algorithm ekf-ci --cooperative --duration-s 600``): mean position RMSE 0.104 m
+  (robots 0.084 / 0.092 / 0.097 / 0.130 / 0.116), against 0.085 m for ``ekf`` cooperative
+  (relative updates, teammates inflated 2x) and 0.183 m alone: CI pays for its guarantee
+  with part of the gain.
 
 Pure: no clock, no randomness (the EKF draws nothing; the generator is accepted for the common
 builder signature).
@@ -112,7 +128,7 @@ from swarmloc.world.replay.replay import LandmarkObservation
 
 #: chi-square quantile, 2 degrees of freedom, 99.9 %.
 CHI2_2DOF_999 = 13.815510557964274
-FUSIONS = ("relative", "sgikf")
+FUSIONS = ("relative", "sgikf", "ci")
 
 
 @dataclass(frozen=True)
@@ -271,6 +287,50 @@ def position_update(pose: np.ndarray, cov: np.ndarray, fix_xy: np.ndarray, fix_c
     return new, 0.5 * (new_cov + new_cov.T), True
 
 
+def ci_position_update(pose: np.ndarray, cov: np.ndarray, fix_xy: np.ndarray, fix_cov: np.ndarray,
+                       gate_chi2: float):
+    """Covariance intersection of this robot's position with a position fix of unknown
+    correlation to it (Julier and Uhlmann), then the rest of the state by conditioning.
+
+    The position block: ``P+^-1 = w P^-1 + (1 - w) R^-1``, ``p+ = P+ (w P^-1 p + (1 - w) R^-1 z)``,
+    ``w`` in (0, 1) the one that minimises ``trace(P+)`` (bounded scalar search); the estimate is
+    kept as it is (``w = 1``) if no ``w`` does better. The rest of the state (heading, odometry
+    calibration) follows the position as the joint Gaussian says, ``x_r += G (p+ - p)``,
+    ``P_rr -= G (P - P+) G^T``, ``P_rp = G P+`` with ``G = P_rp P^-1``: the CI update's usual
+    form on the whole state (``cov / w``) would inflate the unobserved heading's variance by
+    ``1 / w`` (tens of times; the test holds this form to it). The gate is the EKF's, on
+    ``P + R``. Returns ``(pose, cov, accepted, w)``."""
+    from scipy.optimize import minimize_scalar
+
+    p, p_cov = pose[:2], cov[:2, :2]
+    nu = fix_xy - p
+    if float(nu @ np.linalg.solve(p_cov + fix_cov, nu)) >= gate_chi2:
+        return pose, cov, False, 1.0
+    info_own, info_fix = np.linalg.inv(p_cov), np.linalg.inv(fix_cov)
+
+    def fused_cov(w: float) -> np.ndarray:
+        return np.linalg.inv(w * info_own + (1.0 - w) * info_fix)
+
+    best = minimize_scalar(lambda w: float(np.trace(fused_cov(w))), bounds=(1e-3, 1.0 - 1e-3),
+                           method="bounded", options={"xatol": 1e-4})
+    w = float(best.x)
+    new_p_cov = fused_cov(w)
+    if float(np.trace(new_p_cov)) >= float(np.trace(p_cov)):
+        return pose, cov, True, 1.0
+    new_p = new_p_cov @ (w * info_own @ p + (1.0 - w) * info_fix @ fix_xy)
+    gain = cov[2:, :2] @ info_own  # G = P_rp P^-1
+    new = pose.copy()
+    new[:2] = new_p
+    new[2:] = pose[2:] + gain @ (new_p - p)
+    new[2] = wrap_angle(new[2])
+    new_cov = cov.copy()
+    new_cov[:2, :2] = new_p_cov
+    new_cov[2:, :2] = gain @ new_p_cov
+    new_cov[:2, 2:] = new_cov[2:, :2].T
+    new_cov[2:, 2:] = cov[2:, 2:] - gain @ (p_cov - new_p_cov) @ gain.T
+    return new, 0.5 * (new_cov + new_cov.T), True, w
+
+
 class EkfLocalizer:
     """EKF with known landmarks for one robot (a
     :class:`~swarmloc.agents.replay.localizers.LandmarkLocalizer`)."""
@@ -346,6 +406,16 @@ class EkfLocalizer:
             teammate_cov = teammate_cov + np.diag([params.teammate_floor_std_m**2] * 2 + [0.0])
         if params.only_from_better and spectral_norm_xy(teammate_cov) >= \
                 spectral_norm_xy(self.covariance):
+            return
+        if params.fusion == "ci":  # no inflation: CI is consistent for any correlation
+            floored = rep.covariance
+            if params.teammate_floor_std_m:
+                floored = floored + np.diag([params.teammate_floor_std_m**2] * 2 + [0.0])
+            xy, cov = position_fix(replace(reading, report=replace(rep, covariance=floored)), self.pose[2],
+                                   self.covariance[2, 2], self.setup.camera)
+            self.pose, self.covariance, accepted, _ = ci_position_update(
+                self.pose, self.covariance, xy, cov, params.gate_chi2)
+            self.teammate_updates += int(accepted)
             return
         inflated = replace(reading, report=replace(rep, covariance=teammate_cov))
         if params.fusion == "sgikf":

@@ -885,6 +885,16 @@ def _build_cfsga(setup, rng, params):
 
 register(Algorithm("dr", "dead reckoning; cooperative: social odometry (SGIKF)", _build_dr))
 register(Algorithm("ekf", "EKF with known landmarks; cooperative: relative updates", _build_ekf))
+
+
+def _build_ekf_ci(setup, rng, params):
+    from swarmloc.agents.replay.ekf import EkfLocalizer, EkfParams
+
+    return EkfLocalizer(setup, params_from_dict(EkfParams, {"fusion": "ci", **params}, "ekf-ci"), rng)
+
+
+register(Algorithm("ekf-ci", "EKF with known landmarks; cooperative: covariance intersection (CoLo's LS-CI)",
+                   _build_ekf_ci))
 register(Algorithm("pf", "AMCL-style particle filter; cooperative: teammates' beliefs", _build_pf))
 register(Algorithm("cfsga", "CFS-GA; cooperative: virtual population", _build_cfsga))
 

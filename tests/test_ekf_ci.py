@@ -1,0 +1,71 @@
+"""Covariance intersection in the cooperative EKF (agents/replay/ekf.py: ci_position_update, the
+algorithm ekf-ci, CoLo's LS-CI; issue 46), against properties derived by hand."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from swarmloc.agents.replay.ekf import ci_position_update, position_update
+from swarmloc.agents.replay.localizers import ALGORITHMS
+from swarmloc.deploy.lab.replay.mrclam import ReplayConfig, run_replay, score
+
+POSE = np.array([1.0, 2.0, 0.3])
+COV = np.array([[0.04, 0.01, 0.002], [0.01, 0.05, 0.001], [0.002, 0.001, 0.01]])
+
+
+def _psd(m: np.ndarray) -> bool:
+    return bool(np.all(np.linalg.eigvalsh(0.5 * (m + m.T)) >= -1e-12))
+
+
+@pytest.mark.parametrize("fix_cov", [np.diag([0.03, 0.02]), np.array([[0.02, -0.008], [-0.008, 0.06]])])
+def test_ci_never_claims_more_than_the_kalman_update_with_independence(fix_cov):
+    fix = np.array([1.1, 1.9])
+    _, kf_cov, ok = position_update(POSE, COV, fix, fix_cov, np.inf)
+    _, ci_cov, accepted, w = ci_position_update(POSE, COV, fix, fix_cov, np.inf)
+    assert ok and accepted and 0.0 < w < 1.0
+    assert _psd(ci_cov - kf_cov)  # the KF, assuming independence, is the more confident
+    # CI lowers the trace it minimises (not every direction's variance: with w < 1 a direction
+    # the fix knows worse than the estimate may widen, the price of not knowing the correlation)
+    assert np.trace(ci_cov[:2, :2]) < np.trace(COV[:2, :2])
+    assert _psd(ci_cov)
+    # the heading, which the fix does not observe, is not inflated (the full-state form
+    # cov / w would multiply its variance by 1 / w)
+    assert ci_cov[2, 2] <= COV[2, 2] + 1e-15
+
+
+def test_a_fix_worse_in_every_direction_leaves_the_estimate_as_it_is():
+    pose, cov, accepted, w = ci_position_update(POSE, COV, np.array([1.2, 2.1]), np.diag([0.5, 0.5]), np.inf)
+    assert accepted and w == 1.0
+    np.testing.assert_array_equal(pose, POSE)
+    np.testing.assert_array_equal(cov, COV)
+
+
+def test_isotropic_case_by_hand_takes_the_better_estimate():
+    # P = a I, R = r I with r < a: the fused position covariance 1 / (w / a + (1 - w) / r) per axis
+    # is smallest at the smallest w: the fix, all but whole (w at the search's bound 1e-3).
+    a, r = 0.09, 0.01
+    cov = np.diag([a, a, 0.02])
+    fix = np.array([1.3, 1.8])
+    pose, new_cov, accepted, w = ci_position_update(POSE, cov, fix, np.diag([r, r]), np.inf)
+    assert accepted and w == pytest.approx(1e-3, abs=2e-4)
+    expected = 1.0 / (w / a + (1.0 - w) / r)
+    np.testing.assert_allclose(np.diag(new_cov)[:2], [expected, expected], rtol=1e-9)
+    assert new_cov[2, 2] == pytest.approx(0.02)  # no correlation with the position: unchanged
+    np.testing.assert_allclose(pose[:2], fix, atol=2e-3)
+
+
+def test_the_gate_refuses_a_far_fix():
+    pose, cov, accepted, _ = ci_position_update(POSE, COV, np.array([9.0, 9.0]), np.diag([0.01, 0.01]), 13.8)
+    assert not accepted and pose is POSE and cov is COV
+
+
+def test_ekf_ci_is_registered_and_runs_cooperatively(synthetic):
+    assert "ekf-ci" in ALGORITHMS
+    from swarmloc.agents.replay.ekf import EkfParams
+
+    with pytest.raises(ValueError, match="fusion"):
+        EkfParams(fusion="cii")
+    result = run_replay(synthetic, ReplayConfig(algorithm="ekf-ci", cooperative=True, duration_s=20.0))
+    scores = score(result)
+    assert all(np.isfinite(s["position_rmse_m"]) and s["position_rmse_m"] < 0.5 for s in scores.values())
