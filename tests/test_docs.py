@@ -1,0 +1,146 @@
+"""The documentation (issue 45): the site builds strictly, the README routes a newcomer, the
+notebooks run and compute what they say, and the package is typed and buildable as a release."""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+BIN = Path(sys.executable).parent
+
+
+def _tool(name: str) -> str:
+    """A console script of this environment (CI installs them with the test extra)."""
+    path = BIN / name
+    if not path.exists():
+        pytest.fail(f"{name} is not installed: pip install -e '.[test]'")
+    return str(path)
+
+
+def _mkdocs_build(config: Path, site: Path) -> subprocess.CompletedProcess:
+    env = {**os.environ, "NO_MKDOCS_2_WARNING": "1"}
+    return subprocess.run([_tool("mkdocs"), "build", "--strict", "--config-file", str(config), "--site-dir",
+                           str(site)], capture_output=True, text=True, env=env, timeout=180, check=False)
+
+
+# ---- the site -------------------------------------------------------------------------------
+
+def test_the_site_builds_strictly_with_every_api_function(tmp_path):
+    done = _mkdocs_build(ROOT / "mkdocs.yml", tmp_path / "site")
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert "WARNING" not in done.stdout + done.stderr
+    api = (tmp_path / "site" / "api" / "index.html").read_text()
+    for name in ("batch", "experiment", "run", "replay", "read_recording", "read_results", "report"):
+        assert f'id="swarmloc.api.{name}"' in api, name
+    for page in ("families/epuck", "families/laser", "families/vision", "families/real-data", "design",
+                 "figures", "experiments", "mrclam", "social-odometry-000"):
+        assert (tmp_path / "site" / page / "index.html").exists(), page
+
+
+def test_a_broken_link_fails_the_strict_build(tmp_path):
+    """The check above can fail: the same site with one dead link does not build."""
+    copy = tmp_path / "repo"
+    shutil.copytree(ROOT / "docs", copy / "docs")
+    shutil.copy(ROOT / "mkdocs.yml", copy / "mkdocs.yml")
+    shutil.copytree(ROOT / "src", copy / "src", ignore=shutil.ignore_patterns("__pycache__"))
+    page = copy / "docs" / "families" / "vision.md"
+    page.write_text(page.read_text() + "\nSee [a page that is not there](nowhere.md).\n")
+    done = _mkdocs_build(copy / "mkdocs.yml", tmp_path / "site")
+    assert done.returncode != 0 and "nowhere.md" in done.stdout + done.stderr
+
+
+# ---- the README -----------------------------------------------------------------------------
+
+README = (ROOT / "README.md").read_text()
+
+
+def test_readme_is_short_and_starts_with_the_two_commands():
+    assert len(README.splitlines()) < 150
+    blocks = re.findall(r"```bash\n(.*?)```", README, re.S)
+    assert blocks[:2] == ["python3 -m venv .venv && . .venv/bin/activate && pip install -e '.[test]' && swarmloc run\n",
+                          "pytest\n"]
+    for family in ("docs/families/epuck.md", "docs/families/laser.md", "docs/families/vision.md",
+                   "docs/families/real-data.md"):
+        assert f"]({family})" in README
+    assert 'swarmloc.batch("ES1", seeds=10, grid={"agent.strategy": ["NC", "SSGIKF"]})' in README
+
+
+def test_readme_links_point_at_files_that_exist():
+    targets = re.findall(r"\]\(([^)#]+)(?:#[^)]*)?\)", README)
+    local = [t for t in targets if not t.startswith(("http://", "https://"))]
+    assert len(local) > 15
+    missing = [t for t in local if not (ROOT / t).exists()]
+    assert missing == []
+
+
+#: Every command the README showed before issue 45 moved its material into docs/: each must
+#: still be written somewhere a reader finds it.
+FORMER_README_COMMANDS = [
+    "swarmloc scenarios", "swarmloc run ES1 --strategy NC --seed 3",
+    "swarmloc run ES1 --set agent.beta=0.001 --strategy SSGIFF", "swarmloc run --realtime --duration-s 60",
+    "swarmloc batch ES1 --strategy SSGIKF", "swarmloc experiment --list", "swarmloc experiment es1-preview",
+    "swarmloc experiment social-odometry-000 --dry-run",
+    "swarmloc report results/es1-preview.csv --reasons docs/es1-preview/reasons.toml",
+    "swarmloc experiment social-odometry-000 --executor dask --scheduler tcp://HEAD:8786",
+    "swarmloc run laser-collab-three-rooms", "swarmloc run laser-kidnap-office --algorithm amcl",
+    "swarmloc experiment laser-table3", "swarmloc report results/laser-table3.csv results/laser-kidnap.csv",
+    "swarmloc run vision-exp3", "swarmloc experiment vision", "swarmloc report results/vision.csv --out docs/vision",
+    "swarmloc run mrclam6-ekf-coop --duration-s 60", "swarmloc experiment mrclam6",
+    "swarmloc report results/mrclam6.csv --out docs/mrclam",
+    "swarmloc mrclam ../shared/data/mrclam/MRCLAM_Dataset6 --algorithm ekf --cooperative",
+    "swarmloc status -e tcp/ROUTER:7447", "swarmloc run --view", "swarmloc view --run lab1 -e tcp/ROUTER:7447",
+    "swarmloc run ES1 --record es1.mcap --record-messages", "swarmloc batch ES1 --record es1-batch.mcap",
+    "swarmloc record --run lab1 lab1.mcap", "swarmloc run laser-collab-three-rooms --view --particles 64",
+    "swarmloc view es1.mcap", "swarmloc replay es1.mcap --speed 2",
+    "swarmloc --plugin examples/cem_localizer.py check laser-collab-three-rooms --algorithm cem",
+    "swarmloc --plugin examples/cem_localizer.py experiment examples/cem-vs-baselines.toml",
+    "swarmloc router -l tcp/0.0.0.0:7447", "swarmloc world ES1 -e tcp/ROUTER:7447 --run lab1 --out results/",
+    "swarmloc agent --robot 0 -e tcp/ROUTER:7447 --run lab1", "swarmloc agents --robots 0-49 -e tcp/ROUTER:7447 --run lab1",
+    "python benchmarks/bench_first_run.py", "SWARMLOC_SCREENSHOTS=docs/images pytest",
+]
+
+
+def test_every_former_readme_command_is_still_in_the_docs():
+    text = README + "".join(p.read_text() for p in (ROOT / "docs").rglob("*.md"))
+    assert [c for c in FORMER_README_COMMANDS if c not in text] == []
+
+
+# ---- packaging as a release would be --------------------------------------------------------
+
+def test_the_public_api_type_checks():
+    done = subprocess.run([sys.executable, "-m", "mypy", "src/swarmloc/api.py"], cwd=ROOT, capture_output=True,
+                          text=True, timeout=300, check=False)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert "Success: no issues found in 1 source file" in done.stdout
+
+
+def test_mypy_would_catch_a_wrong_return_type(tmp_path):
+    """The check above can fail: a copy of the API that returns the wrong type is refused."""
+    bad = tmp_path / "api_bad.py"
+    bad.write_text((ROOT / "src" / "swarmloc" / "api.py").read_text().replace(
+        'return Path(out) / "README.md"', 'return str(Path(out) / "README.md")'))
+    done = subprocess.run([sys.executable, "-m", "mypy", "--config-file", str(ROOT / "pyproject.toml"), str(bad)],
+                          cwd=ROOT, capture_output=True, text=True, timeout=300, check=False)
+    assert done.returncode == 1 and "Incompatible return value type" in done.stdout, done.stdout
+
+
+def test_sdist_and_wheel_build_pass_twine_check_and_ship_py_typed(tmp_path):
+    import zipfile
+
+    done = subprocess.run([sys.executable, "-m", "build", "--outdir", str(tmp_path), str(ROOT)],
+                          capture_output=True, text=True, timeout=300, check=False)
+    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
+    wheels, sdists = list(tmp_path.glob("*.whl")), list(tmp_path.glob("*.tar.gz"))
+    assert len(wheels) == 1 and len(sdists) == 1
+    names = zipfile.ZipFile(wheels[0]).namelist()
+    assert "swarmloc/py.typed" in names and "swarmloc/api.py" in names
+    check = subprocess.run([_tool("twine"), "check", "--strict", *map(str, wheels + sdists)],
+                           capture_output=True, text=True, timeout=120, check=False)
+    assert check.returncode == 0 and check.stdout.count("PASSED") == 2, check.stdout + check.stderr
