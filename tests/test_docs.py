@@ -63,7 +63,7 @@ README = (ROOT / "README.md").read_text()
 
 def test_readme_is_short_and_starts_with_the_two_commands():
     assert len(README.splitlines()) < 150
-    blocks = re.findall(r"```bash\n(.*?)```", README, re.S)
+    blocks = re.findall(r"```bash\n(.*?)```", README, re.DOTALL)
     assert blocks[:2] == ["python3 -m venv .venv && . .venv/bin/activate && pip install -e '.[test]' && swarmloc run\n",
                           "pytest\n"]
     for family in ("docs/families/epuck.md", "docs/families/laser.md", "docs/families/vision.md",
@@ -222,3 +222,10 @@ def test_sdist_and_wheel_build_pass_twine_check_and_ship_py_typed(tmp_path):
     check = subprocess.run([_tool("twine"), "check", "--strict", *map(str, wheels + sdists)],
                            capture_output=True, text=True, timeout=120, check=False)
     assert check.returncode == 0 and check.stdout.count("PASSED") == 2, check.stdout + check.stderr
+
+
+def test_changelog_keeps_an_unreleased_section():
+    text = (ROOT / "CHANGELOG.md").read_text()
+    assert "keepachangelog.com" in text
+    unreleased = text.split("## [Unreleased]", 1)[1].split("\n## [", 1)[0]
+    assert "### Added" in unreleased and "swarmloc.batch" in unreleased
