@@ -8,6 +8,7 @@ import re
 import shutil
 import subprocess
 import sys
+import textwrap
 from pathlib import Path
 
 import pytest
@@ -209,7 +210,7 @@ def test_mypy_would_catch_a_wrong_return_type(tmp_path):
     assert done.returncode == 1 and "Incompatible return value type" in done.stdout, done.stdout
 
 
-def test_sdist_and_wheel_build_pass_twine_check_and_ship_py_typed(tmp_path):
+def test_sdist_and_wheel_build_pass_twine_check_and_the_wheel_runs_alone(tmp_path):
     import zipfile
 
     done = subprocess.run([sys.executable, "-m", "build", "--outdir", str(tmp_path), str(ROOT)],
@@ -222,6 +223,35 @@ def test_sdist_and_wheel_build_pass_twine_check_and_ship_py_typed(tmp_path):
     check = subprocess.run([_tool("twine"), "check", "--strict", *map(str, wheels + sdists)],
                            capture_output=True, text=True, timeout=120, check=False)
     assert check.returncode == 0 and check.stdout.count("PASSED") == 2, check.stdout + check.stderr
+    _wheel_runs_outside_the_checkout(wheels[0], tmp_path)
+
+
+def _wheel_runs_outside_the_checkout(wheel: Path, tmp_path: Path) -> None:
+    """The wheel alone (installed into a folder of its own, the dependencies from this
+    environment) holds every layer and data file: its scenarios load and a replay runs."""
+    target = tmp_path / "installed"
+    done = subprocess.run([sys.executable, "-m", "pip", "install", "--quiet", "--no-deps", "--target", str(target),
+                           str(wheel)], capture_output=True, text=True, timeout=300, check=False)
+    assert done.returncode == 0, done.stderr
+    code = textwrap.dedent("""
+        import numpy as np, swarmloc, swarmloc.api
+        from swarmloc.deploy.scenario import load_any
+        from swarmloc.world.replay.mrclam import SyntheticConfig, synthesize
+        assert swarmloc.__file__.startswith(TARGET) and swarmloc.api.__file__.startswith(TARGET)
+        import swarmloc.deploy, swarmloc.world
+        assert swarmloc.deploy.__file__.startswith(TARGET) and swarmloc.world.__file__.startswith(TARGET)
+        for name in ("ES1", "laser-collab-three-rooms", "vision-exp3", "mrclam6-ekf-coop"):
+            load_any(name)
+        data = synthesize(SyntheticConfig(n_robots=2, n_landmarks=6, duration_s=10.0), np.random.default_rng(1))
+        df = swarmloc.replay(data, algorithm="ekf", cooperative=True)
+        print(sorted(set(df["robot"])), len(df))
+    """).replace("TARGET", repr(str(target)))
+    env = {**os.environ, "PYTHONPATH": str(target)}
+    run = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=env, capture_output=True, text=True,
+                         timeout=300, check=False)
+    assert run.returncode == 0, run.stderr[-3000:]
+    assert run.stdout.split("\n")[0] == "[1, 2] 20"
+    assert (target / "swarmloc" / "py.typed").exists()
 
 
 def test_changelog_keeps_an_unreleased_section():
