@@ -259,3 +259,17 @@ def test_changelog_keeps_an_unreleased_section():
     assert "keepachangelog.com" in text
     unreleased = text.split("## [Unreleased]", 1)[1].split("\n## [", 1)[0]
     assert "### Added" in unreleased and "swarmloc.batch" in unreleased
+
+
+def test_the_api_pages_column_table_is_the_experiment_engines():
+    import importlib
+
+    rows = {}
+    for line in (ROOT / "docs" / "api.md").read_text().splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if len(cells) == 3 and cells[1].startswith("`experiment`"):
+            rows[cells[0].split()[0]] = [re.findall(r"`([^`]+)`", c) for c in cells[1:]]
+    assert sorted(rows) == ["e-puck", "laser", "replay", "vision"]
+    for family, folder in (("e-puck", "epuck"), ("laser", "laser"), ("vision", "vision"), ("replay", "replay")):
+        module = importlib.import_module(f"swarmloc.deploy.lab.{folder}.experiment")
+        assert rows[family] == [list(module.LEAD_COLUMNS), list(module.METRIC_COLUMNS)], family
