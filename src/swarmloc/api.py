@@ -1,20 +1,20 @@
 """swarmloc from Python: the functions a notebook calls, each returning a pandas data frame.
 
 Every function is a thin layer over the machinery the ``swarmloc`` command uses, not a second
-path: :func:`batch` and :func:`experiment` plan and run their jobs with the experiment engine
+path: ``batch`` and ``experiment`` plan and run their jobs with the experiment engine
 (``swarmloc.deploy.lab.experiment``: the same rows, resume and executors as ``swarmloc
-experiment``), :func:`run` starts the same processes as ``swarmloc run``, :func:`replay` is
-``swarmloc mrclam``'s replay, :func:`read_recording` reads what ``--record`` wrote, and
-:func:`report` is ``swarmloc report``.
+experiment``), ``run`` starts the same processes as ``swarmloc run``, ``replay`` is
+``swarmloc mrclam``'s replay, ``read_recording`` reads what ``--record`` wrote, and
+``report`` is ``swarmloc report``.
 
 Settings are keyword arguments, checked as the command line checks ``--set``: a family's flags
 by their short names (``strategy``, ``robots``, ``beta``, ``seed``, ``duration_s``,
 ``algorithm``: as ``--strategy`` and so on), any other scenario key dotted through ``**{...}``
 or with ``__`` for the dots (``agent__beta=0.01`` is ``agent.beta=0.01``). An unknown key is a
-:class:`~swarmloc.config.ConfigError` naming it, with a suggestion.
+``swarmloc.config.ConfigError`` naming it, with a suggestion.
 
-Results are tidy: one row per run (:func:`batch`, :func:`experiment`, :func:`run`), per robot
-and tick (:func:`read_recording`, :func:`replay`), with the columns of the CSV rows the
+Results are tidy: one row per run (``batch``, ``experiment``, ``run``), per robot
+and tick (``read_recording``, ``replay``), with the columns of the CSV rows the
 experiment engine writes (documented per family in ``deploy/lab/<family>/experiment.py``).
 
 Nothing heavy is imported until a function is called: ``import swarmloc`` stays fast (no numba,
@@ -181,11 +181,11 @@ def _token() -> str:
 def replay(dataset: str | Path | Any, *, algorithm: str = "ekf", cooperative: bool = False, seed: int = 0,
            duration_s: float | None = None, every_s: float = 1.0, **options: Any) -> pd.DataFrame:
     """``swarmloc mrclam DATA``: replay a multi-robot data set (an MRCLAM folder, or a loaded
-    :class:`~swarmloc.world.replay.mrclam.MrclamDataset`) to a localizer and
+    ``swarmloc.world.replay.mrclam.MrclamDataset``) to a localizer and
     return one row per robot and time (every ``every_s`` seconds of the replay): ``robot``,
     ``t_s`` (since the start), the estimate ``x_m, y_m, theta_rad``, the ground truth
     ``true_x_m, true_y_m, true_theta_rad`` and ``error_m`` (NaN where the data has no truth).
-    ``options`` are :class:`~swarmloc.deploy.lab.replay.mrclam.ReplayConfig` fields (``params``,
+    ``options`` are ``swarmloc.deploy.lab.replay.mrclam.ReplayConfig`` fields (``params``,
     ``calibration``, ``start``, ``kidnap_s``, ...)."""
     import numpy as np
     import pandas as pd
