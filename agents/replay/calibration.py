@@ -305,6 +305,11 @@ class SelfCalibratingLocalizer:
     def setup(self):
         return self.inner.setup
 
+    def covariance_xy(self):
+        """The wrapped localizer's position covariance, if it gives one."""
+        inner = getattr(self.inner, "covariance_xy", None)
+        return inner() if inner is not None else None
+
     @property
     def rejected(self):
         return getattr(self.inner, "rejected", ())

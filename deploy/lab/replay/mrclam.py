@@ -163,6 +163,9 @@ class ReplayResult:
     rejected_payloads: int = 0
     #: ``(robot id, tick)`` of the kidnap, or None.
     kidnap: tuple[int, int] | None = None
+    #: (T, N, 2, 2) each estimate's position covariance, NaN where the localizer gives none
+    #: (``covariance_xy()``: the EKFs; issue 46's consistency).
+    covariance_xy: np.ndarray | None = None
 
     def position_error_m(self) -> np.ndarray:
         """(T, N) distance between estimate and truth (NaN where no truth)."""
@@ -277,6 +280,7 @@ def run_replay(dataset: MrclamDataset, config: ReplayConfig) -> ReplayResult:
               for i, rid in enumerate(world.robot_ids)}
     n = len(world.robot_ids)
     estimates = np.empty((world.n_ticks, n, 3))
+    covariance = np.full((world.n_ticks, n, 2, 2), np.nan)
     rejected = 0
     t0 = time.process_time()
     while not world.done:
@@ -286,12 +290,15 @@ def run_replay(dataset: MrclamDataset, config: ReplayConfig) -> ReplayResult:
             brain = brains[obs.robot_id]
             brain.step(obs)
             estimates[k, i] = brain.estimate()
+            cov_xy = getattr(brain, "covariance_xy", None)
+            if cov_xy is not None and (c := cov_xy()) is not None:
+                covariance[k, i] = c
             outgoing[obs.robot_id] = brain.outgoing()
             rejected += len(getattr(brain, "rejected", ()))
         world.step(outgoing)
     cpu = time.process_time() - t0
     return ReplayResult(config, world.robot_ids, world.tick_end_times_s.copy(), estimates,
-                        world.ground_truth(), cpu, rejected, world.kidnap_tick)
+                        world.ground_truth(), cpu, rejected, world.kidnap_tick, covariance)
 
 
 def localized_from(error_m: np.ndarray, threshold_m: float = LOCALIZED_M) -> int | None:
@@ -313,7 +320,8 @@ def score(result: ReplayResult) -> dict[int, dict[str, float]]:
     of ticks scored; ``localized_s``, the time from the start until the error falls under
     :data:`LOCALIZED_M` and stays there to the end (NaN: never), and ``rmse_localized_m``, the
     position RMSE from then on; for the kidnapped robot ``recovery_s``, the same time counted
-    from the kidnap (NaN for the others, or if it never recovers)."""
+    from the kidnap (NaN for the others, or if it never recovers). Consistency is
+    :func:`consistency`'s."""
     out = {}
     err = result.position_error_m()
     heading = wrap_angle(result.estimates[..., 2] - result.truth[..., 2])
@@ -339,6 +347,40 @@ def score(result: ReplayResult) -> dict[int, dict[str, float]]:
             "rmse_localized_m": float(np.sqrt(np.mean(after**2))) if after.size else math.nan,
             "recovery_s": recovery,
         }
+    return out
+
+
+def consistency(result: ReplayResult) -> dict[int, dict[str, float]]:
+    """Per robot, for localizers that give a covariance (issue 46): ``position_nees_mean``, the
+    mean over scored ticks of the position's normalized estimation error squared ``e^T P^-1 e``
+    (2 for a consistent filter; larger: overconfident), and ``position_nees_in_95``, the share of
+    those ticks within the chi-square 95 % quantile for 2 degrees of freedom (0.95 if
+    consistent); NaN without a covariance. Apart from :func:`score`, whose figures the process
+    path reproduces (an agent process reports its estimate, not its covariance)."""
+    nees = position_nees(result)
+    out = {}
+    for i, rid in enumerate(result.robot_ids):
+        v = nees[np.isfinite(nees[:, i]), i]
+        out[rid] = {"position_nees_mean": float(np.mean(v)) if v.size else math.nan,
+                    "position_nees_in_95": float(np.mean(v <= CHI2_2DOF_95)) if v.size else math.nan}
+    return out
+
+
+#: chi-square 95 % quantile, 2 degrees of freedom.
+CHI2_2DOF_95 = 5.991464547107979
+
+
+def position_nees(result: ReplayResult) -> np.ndarray:
+    """(T, N) each tick's position NEES ``e^T P^-1 e`` (NaN without a covariance or truth)."""
+    out = np.full(result.estimates.shape[:2], np.nan)
+    if result.covariance_xy is None:
+        return out
+    e = result.estimates[..., :2] - result.truth[..., :2]
+    c = result.covariance_xy
+    have = np.isfinite(e).all(axis=-1) & np.isfinite(c).all(axis=(-2, -1))
+    if have.any():
+        sol = np.linalg.solve(c[have], e[have][..., None])[..., 0]
+        out[have] = np.einsum("ij,ij->i", e[have], sol)
     return out
 
 
@@ -404,6 +446,10 @@ def print_scores(result: ReplayResult, scores: dict[int, dict[str, float]], name
     pos = [s["position_rmse_m"] for s in scores.values()]
     head = [s["heading_rmse_rad"] for s in scores.values()]
     print(f"{'mean':>6} {np.mean(pos):13.3f} {np.mean(head):19.3f}")
+    nees = {rid: (c["position_nees_mean"], c["position_nees_in_95"]) for rid, c in consistency(result).items()}
+    if any(np.isfinite(v[0]) for v in nees.values()):
+        print("consistency, position NEES mean (2 if consistent) / share within chi2 95 % (0.95): "
+              + ", ".join(f"{rid} {m:.1f} / {f:.2f}" for rid, (m, f) in nees.items()))
 
 
 # --------------------------------------------------------------------------------------------
