@@ -52,3 +52,17 @@ def test_three_collaborating_laser_robots_over_zenoh_match_in_process_and_locali
         assert metrics[key] == local[key], key
     assert metrics["final_error_max_m"] < FINAL_ERROR_BOUND_M
     assert max(metrics["final_position_error_m"]) < 2 * FINAL_ERROR_BOUND_M
+
+
+def test_player_amcl_robot_over_zenoh_matches_in_process(tmp_path):
+    """Player's AMCL (issue 43) as an agent process gives the in-process run's figures."""
+    scenario = load_any("laser-robust-office", {"seed": 3, "algorithm": "amcl-player"},
+                        ["world.steps=120", "algorithm.params.min_particles=1000",
+                         "algorithm.params.max_particles=10000"])
+    assert scenario.scenario.algorithm.name == "amcl-player"
+    result = _run_processes(tmp_path, scenario)
+    assert result["reason"] == "completed"
+    local = run_laser(scenario.scenario).summary
+    for key in ("final_error_m", "final_error_max_m", "mean_error_m", "settle_step", "localized"):
+        assert result["metrics"][key] == local[key], key
+    assert local["localized"]  # seed 3 localizes in process: the comparison is not of two failures

@@ -44,8 +44,9 @@ computed (using the Euclidean metric) with respect to the best hypothesis": the 
 
 Algorithms are chosen by name from :data:`ALGORITHMS` (a registry that rejects duplicates):
 ``ssga`` (MR-SSGA, 002), ``simple_ga`` (the simple GA of 002 table 3), ``cfsga`` (CFS-GA, 003),
-``amcl`` (AMCL-style particle filter with KLD sampling and recovery, 003; the collaborative PF of
-002 table 3 with a fixed population). ``python -m swarmloc.deploy.lab.laser.runner SCENARIO`` runs one.
+``amcl`` (the modern, ROS-amcl-like particle filter with KLD sampling and recovery: the
+collaborative PF of 002 table 3 with a fixed population, and the stronger baseline of 003),
+``amcl-player`` (Player's ``amcl`` driver as 003 ran it, :mod:`swarmloc.agents.laser.amcl_player`). ``python -m swarmloc.deploy.lab.laser.runner SCENARIO`` runs one.
 """
 
 from __future__ import annotations
@@ -86,6 +87,9 @@ class AlgorithmEntry:
     to one). ``params_type``: its parameter class with ``from_dict(mapping)`` (or a path; None:
     the parameters are checked only when a localizer is built). ``population_keys``: the
     parameters that :attr:`AlgorithmConfig.population` sets (all to the same value).
+    ``communicates``: whether the localizer broadcasts to teammates when cooperative (False: it
+    never sends, so no teammate payload ever reaches it, and the contract checker's "bad input"
+    check has nothing to corrupt).
     """
 
     name: str
@@ -93,6 +97,7 @@ class AlgorithmEntry:
     localizer: Any
     params_type: Any = None
     population_keys: tuple[str, ...] = ()
+    communicates: bool = True
 
     def params(self, population: int | None, params: dict | None) -> dict:
         """The parameter dict a localizer is built with: the population, then ``params`` (which
@@ -136,7 +141,7 @@ class AlgorithmRegistry(Registry[AlgorithmEntry]):
 
 
 def default_algorithms() -> AlgorithmRegistry:
-    """The four localizers of issue 4."""
+    """The four localizers of issue 4, and Player's AMCL of issue 43."""
     registry = AlgorithmRegistry()
     registry.register(AlgorithmEntry(
         "ssga", "MR-SSGA", "swarmloc.agents.laser.ssga:SSGALocalizer",
@@ -150,6 +155,10 @@ def default_algorithms() -> AlgorithmRegistry:
     registry.register(AlgorithmEntry(
         "amcl", "AMCL", "swarmloc.agents.laser.amcl:AMCLLocalizer",
         "swarmloc.agents.laser.amcl:AMCLParams", ("min_particles", "max_particles")))
+    registry.register(AlgorithmEntry(
+        "amcl-player", "AMCL (Player)", "swarmloc.agents.laser.amcl_player:PlayerAMCLLocalizer",
+        "swarmloc.agents.laser.amcl_player:PlayerAMCLParams", ("min_particles", "max_particles"),
+        communicates=False))
     return registry
 
 
