@@ -127,6 +127,7 @@ from swarmloc.agents.laser.localizer import (
     Sighting,
     evenly_spaced,
 )
+from swarmloc.agents.laser.refine import check_refine_options, compass_search
 from swarmloc.world.laser.laser import cast_rays, unicycle_model, wrap_angle
 from swarmloc.world.laser.maps import SegmentMap, build_map, free_space_sample
 
@@ -202,8 +203,17 @@ class CFSGAParams:
     random_clearance_m: float = 0.3
     #: At most this many above-average individuals per radio payload (the fittest first).
     max_shared_individuals: int = 1000
+    #: Not in 003 (issue 43; 0: off, the paper's algorithm): compass-search iterations on this
+    #: step's raw fitness from the ``refine_individuals`` fittest individuals, which replace them
+    #: (:mod:`swarmloc.agents.laser.refine`), with initial steps ``refine_step_m``/``_rad``.
+    refine_iterations: int = 0
+    refine_individuals: int = 1
+    refine_step_m: float = 0.05
+    refine_step_rad: float = 0.02
 
     def __post_init__(self) -> None:
+        check_refine_options(self.refine_iterations, self.refine_individuals,
+                             self.refine_step_m, self.refine_step_rad)
         _require_int(self.population_size, "population_size", 2, 1_000_000)
         _require_int(self.tournament_size, "tournament_size", 1, self.population_size)
         _require_int(
@@ -669,6 +679,21 @@ class FitnessSharingGA:
         self.shared_fitness = values / counts
         return values
 
+    def refine(self, raw_fitness: RawFitness) -> None:
+        """The refinement option: compass search on ``raw_fitness`` from the fittest
+        ``refine_individuals``; they take the refined poses and fitness, and the shared fitness
+        is recomputed (niche counts move with them). After :meth:`evaluate`."""
+        p = self.params
+        top = np.argsort(-self.raw_fitness, kind="stable")[: p.refine_individuals]
+        poses, values = compass_search(raw_fitness, self.population[top], self.raw_fitness[top],
+                                       p.refine_iterations, p.refine_step_m, p.refine_step_rad)
+        self.population[top] = poses
+        self.raw_fitness[top] = values
+        counts = niche_counts(
+            self.population, self.population, self.niche_radius_m, p.sharing_alpha
+        )
+        self.shared_fitness = self.raw_fitness / counts
+
     def above_average(self, limit: int | None = None) -> np.ndarray:
         """Individuals whose raw fitness exceeds the population average (003 §IV-B), the fittest
         first, at most ``limit``: ``(Q, 3)``. Empty before the first evaluation."""
@@ -890,6 +915,8 @@ class CFSGALocalizer:
             setup.turn_rate_std_rad_s * diffusion,
         )
         self.ga.evaluate(raw_fitness)
+        if p.refine_iterations > 0 and p.refine_individuals > 0:
+            self.ga.refine(raw_fitness)
         virtual = None
         self.rejected = ()
         if setup.cooperative:

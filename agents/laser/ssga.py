@@ -108,6 +108,7 @@ from swarmloc.agents.laser.localizer import (
     Sighting,
     evenly_spaced,
 )
+from swarmloc.agents.laser.refine import check_refine_options, compass_search
 from swarmloc.world.laser.laser import cast_rays, unicycle_model, wrap_angle
 from swarmloc.world.laser.maps import SegmentMap, build_map, free_space_sample
 
@@ -160,6 +161,10 @@ class GeneticParams:
     from walls (no prior, 002 §5.2).
     ``elite_exact_motion``: eq. 3 moves the last step's best individual by the odometry alone,
     without the motion noise every other individual gets (module docstring, readings).
+    ``refine_iterations`` (0: off, the papers' algorithm), ``refine_individuals``,
+    ``refine_step_m``, ``refine_step_rad``: not in 002; a compass search on eq. 1-2 of this
+    step from the ``refine_individuals`` fittest individuals before reproduction, which replace
+    them (:mod:`swarmloc.agents.laser.refine`, issue 43).
     """
 
     population_size: int = 100
@@ -170,9 +175,15 @@ class GeneticParams:
     mutation_std_max_rad: float = 0.5
     init_clearance_m: float = 0.1
     elite_exact_motion: bool = False
+    refine_iterations: int = 0
+    refine_individuals: int = 1
+    refine_step_m: float = 0.05
+    refine_step_rad: float = 0.02
 
     def __post_init__(self) -> None:
         _positive_int(self.population_size, "population_size", minimum=2)
+        check_refine_options(self.refine_iterations, self.refine_individuals,
+                             self.refine_step_m, self.refine_step_rad)
         if not isinstance(self.elite_exact_motion, (bool, np.bool_)):
             raise TypeError(
                 f"elite_exact_motion: must be true or false, got {self.elite_exact_motion!r}"
@@ -678,6 +689,8 @@ class GeneticLocalizer:
         views, anchors = self._teammate_views(obs)
         self.n_collaborators = len(views)
         self.fitness = self.fitness_model.team_fitness(self.population, ranges, views, anchors)
+        if self.params.refine_iterations > 0 and self.params.refine_individuals > 0:
+            self._refine(ranges, views, anchors)
         self._best = self.population[int(np.argmax(self.fitness))].copy()
         peak = self.fitness_model.peak * (1 + len(views))
         self.population = self._reproduce(self.population, self.fitness, peak)
@@ -785,6 +798,26 @@ class GeneticLocalizer:
             )
             anchors.append(anchor)
         return views, anchors
+
+    def _refine(self, ranges: np.ndarray, views, anchors) -> None:
+        """The option of :mod:`~swarmloc.agents.laser.refine`: climb eq. 1-2 of this step from the
+        fittest individuals; each refined individual replaces its original."""
+        p = self.params
+        current = [anchor is self.population for anchor in anchors]
+        odometry = self._odometry
+
+        def score(poses: np.ndarray) -> np.ndarray:
+            back = inverse_unicycle(poses, *odometry) if not all(current) else None
+            return self.fitness_model.team_fitness(
+                poses, ranges, views, [poses if now else back for now in current])
+
+        top = np.argsort(-self.fitness, kind="stable")[: p.refine_individuals]
+        poses, values = compass_search(score, self.population[top], self.fitness[top],
+                                       p.refine_iterations, p.refine_step_m, p.refine_step_rad)
+        self.population = self.population.copy()
+        self.population[top] = poses
+        self.fitness = self.fitness.copy()
+        self.fitness[top] = values
 
     def _reproduce(self, population_m: np.ndarray, fitness: np.ndarray, peak: float):
         raise NotImplementedError

@@ -145,6 +145,41 @@ def cast_rays(
     return out
 
 
+def single_scan_crb(
+    world_map: SegmentMap,
+    poses_m: np.ndarray,
+    beam_angles_rad: np.ndarray,
+    max_range_m: float,
+    noise_std_m: float,
+    step: float = 1e-4,
+) -> np.ndarray:
+    """Cramér-Rao bound of one scan (eq. 4 of 002 plus Gaussian noise of ``noise_std_m``) on the
+    position, pose unknown: ``sqrt(tr [J^-1]_xy)`` in metres for each of ``poses_m`` ``(P, 3)``,
+    with the Fisher information ``J = H^T H / sigma^2`` and ``H`` the ``(L, 3)`` derivatives of
+    the noise-free ranges in x, y and heading (central differences of :func:`cast_rays`, which
+    is exact). Beams at maximum range carry no information (their derivative is zero); ``inf``
+    where ``J`` is singular (a pose the scan cannot fix, such as a corridor's axis). The RMS
+    position error of any unbiased estimator from that one scan is at least this (issue 43)."""
+    poses = _poses(poses_m)
+    sigma = _check_finite_nonneg(noise_std_m, "noise_std_m", positive=True)
+    jacobian = np.empty((poses.shape[0], len(beam_angles_rad), 3))
+    for axis in range(3):
+        shift = np.zeros(3)
+        shift[axis] = step
+        ahead = cast_rays(world_map, poses + shift, beam_angles_rad, max_range_m)
+        behind = cast_rays(world_map, poses - shift, beam_angles_rad, max_range_m)
+        jacobian[..., axis] = (ahead - behind) / (2.0 * step)
+    # A beam whose end crosses a segment's end between the two casts has no derivative there.
+    jacobian[np.abs(jacobian) > 1.0 / step] = 0.0
+    info = np.einsum("pla,plb->pab", jacobian, jacobian) / sigma**2
+    out = np.full(poses.shape[0], math.inf)
+    for i, matrix in enumerate(info):
+        if np.linalg.cond(matrix) < 1e12:
+            covariance = np.linalg.inv(matrix)
+            out[i] = math.sqrt(max(0.0, covariance[0, 0] + covariance[1, 1]))
+    return out
+
+
 @dataclass(frozen=True)
 class LaserParams:
     """A ring of ``n_beams`` laser beams evenly spread over 360 deg (the first along the heading),
