@@ -378,6 +378,7 @@ def test_registry_rejects_duplicates_and_suggests():
         "wall_two_landmarks",
         "symmetric",
         "three_rooms_corridor",
+        "three_corridors",
     }
 
 

@@ -357,6 +357,26 @@ def three_rooms_corridor_map() -> SegmentMap:
     return SegmentMap("three_rooms_corridor", np.array(segs))
 
 
+def three_corridors_map() -> SegmentMap:
+    """Seed 003 fig. 4 as its text describes it (issue 43): "robots have been purposely placed in
+    the middle of three different corridors where laser data are temporarily partially useless".
+    24 x 14 m: a west and an east hall, 3 m wide (x in [0, 3] and [21, 24]), joined by three 2 m
+    corridors at y in [1, 3], [6, 8] and [11, 13]. The floor is invariant under a half turn
+    about its centre but for one niche (1.5 x 1.2 m) in the north wall of the middle corridor at
+    x in [12.5, 14]: in the middle of a corridor the 8 m laser sees two parallel walls and
+    nothing along the axis, and every place but the niche's surroundings has a twin. The drawing
+    of 003's floor is not in its text: this is our reconstruction of the text."""
+    segs = _box(0.0, 0.0, 24.0, 14.0)
+    for x in (3.0, 21.0):  # the halls' inner sides, between the corridor mouths
+        for y0, y1 in ((0.0, 1.0), (3.0, 6.0), (8.0, 11.0), (13.0, 14.0)):
+            segs += _wall(x, y0, x, y1)
+    for y in (1.0, 3.0, 6.0, 11.0, 13.0):
+        segs += _wall(3.0, y, 21.0, y)
+    segs += _wall(3.0, 8.0, 21.0, 8.0, doors=[(13.25, 1.5)])
+    segs += [(12.5, 8.0, 12.5, 9.2), (12.5, 9.2, 14.0, 9.2), (14.0, 9.2, 14.0, 8.0)]
+    return SegmentMap("three_corridors", np.array(segs))
+
+
 class MapRegistry:
     """Map builders by name. Registering a name twice is an error; an unknown name suggests the
     closest registered one."""
@@ -393,6 +413,7 @@ def default_registry() -> MapRegistry:
     registry.register("wall_two_landmarks", wall_two_landmarks_map)
     registry.register("symmetric", symmetric_map)
     registry.register("three_rooms_corridor", three_rooms_corridor_map)
+    registry.register("three_corridors", three_corridors_map)
     return registry
 
 
