@@ -458,11 +458,13 @@ def test_amcl_localizes_the_office_robot_before_the_kidnap():
 def test_shipped_laser_specs_plan_the_papers_trial_counts():
     sizes = {name: len(plan(load_spec(name))) for name in
              ("laser-table3", "laser-kidnap", "laser-collab", "laser-robustness")}
-    # 3 algorithms x 2 populations x 100; (3 + AMCL without recovery) x 100;
-    # 2 modes x 2 scenarios (003's and the long corridor) x 100;
-    # (3 algorithms + AMCL without recovery) x 2 maps x 250.
-    assert sizes == {"laser-table3": 600, "laser-kidnap": 400, "laser-collab": 400,
-                     "laser-robustness": 2000}
+    # (3 algorithms + MR-SSGA refined) x 2 populations x 100; (3 + modern AMCL without
+    # recovery + Player AMCL, with and without injection, + CFS-GA refined) x 100;
+    # 2 modes x 3 scenarios (003's three corridors, the one corridor, its long variant) x 100;
+    # (3 algorithms + modern AMCL without recovery + Player AMCL) x 2 maps x 250, and Player
+    # AMCL's two other readings x 2 maps x 100.
+    assert sizes == {"laser-table3": 800, "laser-kidnap": 700, "laser-collab": 600,
+                     "laser-robustness": 2900}
 
 
 def test_job_row_and_report(tmp_path):
@@ -497,9 +499,10 @@ def test_job_row_and_report(tmp_path):
             writer.writerow(["" if v is None else v for v in line])
     page = write_report([results], tmp_path / "report", command="test")
     text = page.read_text()
-    assert "003 fig. 3" in text and "| CFS-GA | 1 |" in text and "| AMCL | 1 |" in text
+    assert "003 fig. 3" in text and "| CFS-GA | 1 |" in text and "| modern AMCL | 1 |" in text
     assert (tmp_path / "report" / "fig3_kidnap.png").stat().st_size > 0
-    assert ALGORITHMS.get("amcl").label == "AMCL"
+    assert ALGORITHMS.get("amcl").label == "modern AMCL"
+    assert ALGORITHMS.get("amcl-player").label == "Player AMCL"
 
 
 def _report_of_spec(spec_path, tmp_path, edit=None) -> str:
@@ -564,7 +567,7 @@ def test_table3_spec_and_report_section(tmp_path):
     assert "What the indexes are over" in text
     assert "up to the symmetry" not in text
     assert (tmp_path / "report" / "table3_floor.png").stat().st_size > 0
-    assert "| 20 | MR-SSGA | 1 |" in text and "| 20 | AMCL | 1 |" in text
+    assert "| 20 | MR-SSGA | 1 |" in text and "| 20 | modern AMCL | 1 |" in text
 
 
 def test_robustness_report_shows_a_named_variant_as_its_own_row(tmp_path):
@@ -590,19 +593,29 @@ def test_robustness_report_shows_a_named_variant_as_its_own_row(tmp_path):
         "algorithm.population" = 200
         "algorithm.params.recovery" = false
         "world.steps" = 6
+        [[group]]
+        name = "amcl-player"
+        scenarios = ["laser-robust-office"]
+        [group.set]
+        "algorithm.name" = "amcl-player"
+        "algorithm.population" = 200
+        "world.steps" = 6
     """))
     text = _report_of_spec(spec_path, tmp_path)
-    rows = [line for line in text.splitlines() if line.startswith("| AMCL")]
-    assert len(rows) == 2, rows
-    plain, variant = rows
-    assert plain.startswith("| AMCL | ") and "(n = 1)" in plain and "| 35 % |" in plain
-    assert variant.startswith("| AMCL (amcl-no-recovery) | ") and "(n = 1)" in variant
+    rows = [line for line in text.splitlines()
+            if line.startswith(("| Player AMCL", "| modern AMCL"))]
+    assert len(rows) == 3, rows
+    player, plain, variant = rows  # Player's first: the filter the paper ran
+    assert player.startswith("| Player AMCL | ") and "| 35 % |" in player
+    # The paper's 35 % is Player's AMCL's, not the modern filter's nor its variant's.
+    assert plain.startswith("| modern AMCL | ") and "(n = 1)" in plain and "| – |" in plain
+    assert variant.startswith("| modern AMCL (amcl-no-recovery) | ") and "(n = 1)" in variant
     assert "| – |" in variant  # no paper figure for a variant the paper did not run
 
 
 def test_collab_report_shows_one_block_per_scenario_with_a_paired_comparison(tmp_path):
     """The fig. 4 section has a table and a figure for 003's scenario (with the paper's figures)
-    and one for the long-corridor variant (without them, with the per-seed comparison)."""
+    and one for a variant (without them); both with the per-seed comparison."""
     spec_path = tmp_path / "laser-collab.toml"
     spec_path.write_text(textwrap.dedent("""\
         name = "laser-collab"
@@ -610,7 +623,7 @@ def test_collab_report_shows_one_block_per_scenario_with_a_paired_comparison(tmp
         replications = 2
         [[group]]
         name = "collab"
-        scenarios = ["laser-collab-three-rooms"]
+        scenarios = ["laser-collab-three-corridors"]
         [group.grid]
         "algorithm.cooperative" = [true, false]
         [group.set]
@@ -638,7 +651,7 @@ def test_collab_report_shows_one_block_per_scenario_with_a_paired_comparison(tmp
 
     text = _report_of_spec(spec_path, tmp_path, set_settling)
     section = text.split("## 003 fig. 4")[1].split("\n## ")[0]
-    assert section.index("`laser-collab-three-rooms.toml`") < section.index(
+    assert section.index("`laser-collab-three-corridors.toml`") < section.index(
         "`laser-collab-three-rooms-long-corridor.toml`")
     rows = [line for line in section.splitlines()
             if line.startswith(("| collaborative", "| autonomous"))]
@@ -646,9 +659,10 @@ def test_collab_report_shows_one_block_per_scenario_with_a_paired_comparison(tmp
     assert "| about 100 |" in rows[0] and "| almost 300 |" in rows[1]
     assert all("| 2 |" in r and "| – |" in r for r in rows[2:])  # no paper figure for ours
     assert "| 100 % | 4 (3-5) |" in rows[2] and "| 100 % | 5 (4-6) |" in rows[3]
-    assert section.count("Paired by seed") == 1
+    assert section.count("Paired by seed") == 2
     assert ("of the 2 seeds where both modes settle, collaboration settles sooner in 1 and "
             "later in 1, by 1 iteration at the median") in section
-    for figure in ("fig4_collab.png", "fig4_laser-collab-three-rooms-long-corridor.png"):
+    for figure in ("fig4_collab.png", "fig4_floor.png",
+                   "fig4_laser-collab-three-rooms-long-corridor.png"):
         assert f"![{figure}]({figure})" in section
         assert (tmp_path / "report" / figure).stat().st_size > 0

@@ -153,10 +153,10 @@ def default_algorithms() -> AlgorithmRegistry:
         "cfsga", "CFS-GA", "swarmloc.agents.laser.cfsga:CFSGALocalizer",
         "swarmloc.agents.laser.cfsga:CFSGAParams", ("population_size",)))
     registry.register(AlgorithmEntry(
-        "amcl", "AMCL", "swarmloc.agents.laser.amcl:AMCLLocalizer",
+        "amcl", "modern AMCL", "swarmloc.agents.laser.amcl:AMCLLocalizer",
         "swarmloc.agents.laser.amcl:AMCLParams", ("min_particles", "max_particles")))
     registry.register(AlgorithmEntry(
-        "amcl-player", "AMCL (Player)", "swarmloc.agents.laser.amcl_player:PlayerAMCLLocalizer",
+        "amcl-player", "Player AMCL", "swarmloc.agents.laser.amcl_player:PlayerAMCLLocalizer",
         "swarmloc.agents.laser.amcl_player:PlayerAMCLParams", ("min_particles", "max_particles"),
         communicates=False))
     return registry
