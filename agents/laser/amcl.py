@@ -1,4 +1,6 @@
-"""AMCL-style Monte Carlo localization: the particle-filter baseline of seeds 002 and 003.
+"""The modern AMCL (``amcl``): Monte Carlo localization as ROS ``amcl`` does it, the stronger
+particle-filter baseline beside Player's (:mod:`swarmloc.agents.laser.amcl_player`,
+``amcl-player``, the filter seed 003 actually ran; issue 43). Reports label the two apart.
 
 Seed 002 (``002_fe2ac635ba0eab3e.txt``) §6, table 3, compares MR-SSGA with "a collaborative
 particle filter (PF)" at populations of 50 and 100; seed 003 (``003_5278cbbbf8cc61de.txt``) §V
@@ -6,7 +8,10 @@ compares CFS-GA with the Player/Stage "Adaptive Monte Carlo Localization algorit
 ref. [20], Fox 2003, KLD-sampling) that "simply adds a number of randomly placed samples at every
 time instant as detailed in [21]" (Probabilistic Robotics, ch. 8, Augmented_MCL), with "adaptive
 population ranging from 10000 to 1000 particles". Neither seed gives more of the filter, so this
-module follows those references, and ROS/Player ``amcl`` where they leave a choice open.
+module follows those references, and ROS ``amcl`` where they leave a choice open: a likelihood
+field widened to 0.5 m and Augmented_MCL's adaptive injection, which make it stronger than the
+Player driver 003 compared with (its ``recovery_alpha`` parameters are ROS's; Player's ``pf.c``
+has none).
 
 One step (:meth:`AugmentedMCL.update`, driven by :meth:`AMCLLocalizer.step`):
 
