@@ -362,9 +362,10 @@ def three_corridors_map() -> SegmentMap:
     the middle of three different corridors where laser data are temporarily partially useless".
     24 x 14 m: a west and an east hall, 3 m wide (x in [0, 3] and [21, 24]), joined by three 2 m
     corridors at y in [1, 3], [6, 8] and [11, 13]. The floor is invariant under a half turn
-    about its centre but for one niche (1.5 x 1.2 m) in the north wall of the middle corridor at
-    x in [12.5, 14]: in the middle of a corridor the 8 m laser sees two parallel walls and
-    nothing along the axis, and every place but the niche's surroundings has a twin. The drawing
+    about its centre but for one bay (3 x 2.5 m, open on its whole width) off the north side of
+    the middle corridor at x in [12, 15]: in the middle of a corridor the 8 m laser sees two
+    parallel walls and nothing along the axis, and every place but the bay's surroundings has a
+    twin. The drawing
     of 003's floor is not in its text: this is our reconstruction of the text."""
     segs = _box(0.0, 0.0, 24.0, 14.0)
     for x in (3.0, 21.0):  # the halls' inner sides, between the corridor mouths
@@ -372,8 +373,8 @@ def three_corridors_map() -> SegmentMap:
             segs += _wall(x, y0, x, y1)
     for y in (1.0, 3.0, 6.0, 11.0, 13.0):
         segs += _wall(3.0, y, 21.0, y)
-    segs += _wall(3.0, 8.0, 21.0, 8.0, doors=[(13.25, 1.5)])
-    segs += [(12.5, 8.0, 12.5, 9.2), (12.5, 9.2, 14.0, 9.2), (14.0, 9.2, 14.0, 8.0)]
+    segs += _wall(3.0, 8.0, 21.0, 8.0, doors=[(13.5, 3.0)])
+    segs += [(12.0, 8.0, 12.0, 10.5), (12.0, 10.5, 15.0, 10.5), (15.0, 10.5, 15.0, 8.0)]
     return SegmentMap("three_corridors", np.array(segs))
 
 
