@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import csv
 import math
+import textwrap
 import tomllib
 from collections import defaultdict
 from collections.abc import Sequence
@@ -248,8 +249,9 @@ def _table3(rows: list[dict], out: Path, reasons: dict) -> Section:
         (f"Three robots start in three rooms of the floor `{'`, `'.join(maps)}` (world/laser/maps.py) "
          f"and walk scripted paths into its corridor "
          f"({', '.join(f'`deploy/scenarios/laser/{s}.toml`' for s in scenarios)}); parameters "
-         "of table 2 of 002, population 50 or 100, 100 trials each. PF = the AMCL-style filter "
-         "with a fixed population (min = max particles), collaborative."),
+         "of table 2 of 002, population 50 or 100, 100 trials each. PF = the modern AMCL "
+         "(`agents/laser/amcl.py`) with a fixed population (min = max particles), "
+         "collaborative (002's PF is collaborative; Player's AMCL is not)."),
         "",
         ("**What the indexes are over.** 002 §6 takes \"minimum, maximum and average error\" "
          "over \"100 trials for each configuration\" and fig. 9 shows the error falling once "
@@ -483,7 +485,8 @@ def _kidnap(rows: list[dict], out: Path, reasons: dict) -> Section:
         "through the corridor to K (north-middle room), waits there, is kidnapped at step "
         f"{kidnap_step} to R (south-east room) and goes on to G (north-east room) "
         "(`laser-kidnap-office.toml`); table I of 003. CFS-GA and SSGA with 300 individuals, "
-        "AMCL adapting between 1000 and 10000 particles. 'Recovered': final error below 0.5 m; "
+        "both AMCLs adapting between 1000 and 10000 particles (Player AMCL: the filter 003 ran; "
+        "modern AMCL: the ROS-amcl-like one). 'Recovered': final error below 0.5 m; "
         "'recovery time': steps from the kidnap until the error stays below 15 cm."),
         "",
         "| algorithm | n | error at step 150, mean (m) | settled < 15 cm before the kidnap | recovered after the kidnap | recovery time, median (steps) | final error, mean / median (m) |",
@@ -695,7 +698,7 @@ def _robustness(rows: list[dict], out: Path, reasons: dict) -> Section:
         + " | failures, all (95 % CI) | paper | final error of successes, median (m) |",
         "|---|---|" + "---|" * len(maps) + "---|---|---|",
     ]
-    fig, axes = _figure(8.0, 4.4)
+    fig, axes = _figure(max(8.0, 1.5 * len(order)), 4.6)
     ax = axes[0][0]
     width = 0.8 / (len(maps) + 1)
     for i, variant in enumerate(order):
@@ -731,8 +734,9 @@ def _robustness(rows: list[dict], out: Path, reasons: dict) -> Section:
             labels.append("all" if m is None else _MAP_SHORT.get(m, m))
     ax.set_xticks(ticks, labels, fontsize=7)
     for i, variant in enumerate(order):
-        ax.text(i, -0.12, _variant_label(variant, by_algo[variant]).replace(" (", "\n("),
-                ha="center", va="top",
+        ax.text(i, -0.12, textwrap.fill(_variant_label(variant, by_algo[variant]), 16,
+                                        break_on_hyphens=True),
+                ha="center", va="top", fontsize=8,
                 transform=ax.get_xaxis_transform())
     ax.set_ylabel("fraction of runs that fail to localize")
     ax.set_title("003 §V robustness (our runs): per map (light) and all (dark), 95 % CI")
@@ -774,15 +778,20 @@ def _load_reasons(out: Path) -> dict[str, str]:
 
 def _cpu_lines(rows: list[dict]) -> list[str]:
     # One line per run shape too: an experiment's scenarios may differ in robots or steps.
+    # Variants of an algorithm (a spec group named otherwise, e.g. a refinement option) apart.
     groups: dict[tuple[str, str, str, int, int], list[dict]] = defaultdict(list)
-    for r in rows:
-        groups[(r["experiment"], r["algorithm"], str(r["population"]), int(r["robots"]),
-                int(r["steps"]))].append(r)
+    for experiment in sorted({r["experiment"] for r in rows}):
+        for variant, variant_rows in _variants([r for r in rows
+                                                if r["experiment"] == experiment]).items():
+            for r in variant_rows:
+                groups[(experiment, variant, str(r["population"]), int(r["robots"]),
+                        int(r["steps"]))].append(r)
     lines = ["| experiment | algorithm | population | runs | robots x steps | CPU per run, mean (s) | CPU per robot-step (ms) |",
              "|---|---|---|---|---|---|---|"]
-    for (exp, algo, pop, robots, steps), g in sorted(groups.items()):
+    for (exp, variant, pop, robots, steps), g in sorted(groups.items()):
         cpu = np.array([r["cpu_s"] for r in g])
-        lines.append(f"| {exp} | {_label(algo)} | {pop} | {len(g)} | {robots} x {steps} | "
+        lines.append(f"| {exp} | {_variant_label(variant, g)} | {pop} | {len(g)} | "
+                     f"{robots} x {steps} | "
                      f"{cpu.mean():.2f} | {1000 * cpu.mean() / (robots * steps):.2f} |")
     total = sum(r["cpu_s"] for r in rows)
     lines += ["", (f"Total CPU of these runs: {total / 60:.1f} min ({total / 120:.1f} min of wall "
@@ -854,7 +863,9 @@ def write_report(paths: Sequence[str | Path], out_dir: str | Path, *, command: s
         ("Generated by `deploy/lab/laser/report.py` from the laser experiments "
         "(`deploy/experiments/laser-*.toml`, issue 4). Our runs stand next to the papers' "
         "numbers: MR-SSGA (002, `agents/laser/ssga.py`), the simple GA (`agents/laser/simple_ga.py`), CFS-GA "
-        "(003, `agents/laser/cfsga.py`) and the AMCL-style particle filter (`agents/laser/amcl.py`), in the "
+        "(003, `agents/laser/cfsga.py`), Player's AMCL as 003 ran it (`agents/laser/amcl_player.py`, "
+        "'Player AMCL') and the stronger modern, ROS-amcl-like particle filter "
+        "(`agents/laser/amcl.py`, 'modern AMCL'), in the "
         "laser world of `world/laser/world.py` (maps of `world/laser/maps.py`: reconstructions, the "
         "papers' drawings are not in their text). Everything here comes from "
         f"{runs} runs (seeds {seeds[0] if seeds else '–'}..{seeds[-1] if seeds else '–'}); "
