@@ -189,6 +189,8 @@ PAPER_TABLE3 = {
     ("simple_ga", "100"): (0.056, 0.009, 0.021), ("amcl", "100"): (0.157, 0.107, 0.133),
 }
 _TABLE3_ORDER = ("ssga", "simple_ga", "amcl")
+#: 002's names of table 3's rows.
+_PAPER_NAMES = {"ssga": "MR-SSGA", "simple_ga": "simple GA", "amcl": "PF"}
 
 
 #: Steps over which the alternative reading of table 3 takes its indexes from the error curve
@@ -249,7 +251,8 @@ def _table3(rows: list[dict], out: Path, reasons: dict) -> Section:
         (f"Three robots start in three rooms of the floor `{'`, `'.join(maps)}` (world/laser/maps.py) "
          f"and walk scripted paths into its corridor "
          f"({', '.join(f'`deploy/scenarios/laser/{s}.toml`' for s in scenarios)}); parameters "
-         "of table 2 of 002, population 50 or 100, 100 trials each. PF = the modern AMCL "
+         "of table 2 of 002, population 50 or 100, the trials of each row in its n column "
+         "(002: 100). PF = the modern AMCL "
          "(`agents/laser/amcl.py`) with a fixed population (min = max particles), "
          "collaborative (002's PF is collaborative; Player's AMCL is not)."),
         "",
@@ -271,7 +274,7 @@ def _table3(rows: list[dict], out: Path, reasons: dict) -> Section:
          + ("trials < 0.5 m up to the symmetry | " if symmetric else "")
          + "first sighting (step) | fig. 9 curve, last steps: min / max / mean (m) | CPU per "
          "run, mean (s) |"),
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|" + ("---|" if symmetric else ""),
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|" + ("---|" if symmetric else ""),
     ]
     for key in keys:
         g = groups[key]
@@ -313,7 +316,7 @@ def _table3(rows: list[dict], out: Path, reasons: dict) -> Section:
               "", ("**Units.** Table 3 of 002 prints no units. We read its entries as metres (a "
               "1.4 cm mean). Read as squared metres (mean squared errors), their square roots "
               "would be " + ", ".join(
-                  f"{_label(a)} {pop}: {math.sqrt(v[2]):.3f} m"
+                  f"{_PAPER_NAMES.get(a, a)} {pop}: {math.sqrt(v[2]):.3f} m"
                   for (a, pop), v in PAPER_TABLE3.items())
               + " (square roots of the means); a reading stated here, not adopted."),
               "", f"**Difference and likely reason.** {reasons.get('table3', DEFAULT_REASON)}"]
@@ -546,12 +549,13 @@ _COLLAB_INTRO = {
         "As 003 writes it: \"robots have been purposely placed in the middle of three different "
         "corridors where laser data are temporarily partially useless\" (issue 43). Floor "
         "`three_corridors` (24 x 14 m, world/laser/maps.py): two halls joined by three alike 2 m "
-        "corridors, invariant under a half turn but for one niche in the middle corridor. Green "
-        "starts in the middle corridor and passes the niche early; red and blue start in the "
-        "middle of the south and north corridors, walk east into the east hall, where the three "
-        "meet (about steps 120-180), then walk west along the middle corridor past the niche "
-        "(red about step 235, blue about 290), which is where, alone, they can first localize "
-        "(`laser-collab-three-corridors.toml`). CFS-GA with 300 individuals, table I of 003 "
+        "corridors, invariant under a half turn but for one 3 x 2.5 m bay off the middle "
+        "corridor. Green starts in front of the bay, paces past it and walks into the east "
+        "hall; red and blue start in the middle of the south and north corridors, walk west to "
+        "the west hall and back east the length of their corridors into the east hall, where "
+        "the three meet (about steps 250-300), then walk west along the middle corridor past "
+        "the bay (about steps 380-420), which is where, alone, they can first localize; 500 "
+        "steps ""(`laser-collab-three-corridors.toml`). CFS-GA with 300 individuals, table I of 003 "
         "(communication range 4 m, line of sight); the same seeds for both modes. Read as the "
         "paper reads its figure: the error averaged over the trials, and the iteration from "
         "which every robot's averaged curve stays under 15 cm; the per-run settling iterations "
