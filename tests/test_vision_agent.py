@@ -203,17 +203,22 @@ def _still_run(cfg: VisionWorldConfig, agent: VisionAgentConfig, ticks: int, mov
     return world, brains
 
 
+#: The additions beyond seed 004 that the first version relied on: parallel start + odometry.
+PRIOR = {"relative_heading": "odometry", "initial_relative_heading_rad": 0.0,
+         "shared_odometry": True}
+
+
 def test_teammate_located_by_stereo_from_the_ball():
     """Side by side 0.6 m apart, parallel, a ball 1.5 m ahead; neither sees the other (it is
     90 deg off the 57 deg field of view). The teammate is at (0, -0.6) / (0, +0.6) in each
-    body frame. Bound: size-based distances to a ball 1.5 m away err by about 1 %, so each
-    estimate is within 0.08 m."""
+    body frame. With the parallel-start prior (an addition beyond the paper): size-based
+    distances to a ball 1.5 m away err by about 1 %, so each estimate is within 0.08 m."""
     cfg = VisionWorldConfig(
         robots=(RobotStart(0.0, 0.3), RobotStart(0.0, -0.3)),
         objects=(FieldObject("ball", 1.5, 0.0),),
         seed=5,
     )
-    world, brains = _still_run(cfg, VisionAgentConfig(), ticks=6)
+    world, brains = _still_run(cfg, VisionAgentConfig(**PRIOR), ticks=6)
     for i, brain in enumerate(brains):
         est = brain.estimates()
         truth = _in_body(world.pose[i], world.pose[1 - i, :2])
@@ -222,6 +227,33 @@ def test_teammate_located_by_stereo_from_the_ball():
         assert est.ball_source == "own"
     world, brains = _still_run(cfg, VisionAgentConfig(sharing=False), ticks=6)
     assert all(not b.estimates().teammates for b in brains)
+
+
+def test_one_common_object_leaves_the_side_ambiguous_until_the_head_looks():
+    """Perception alone (the paper: ball position and neck angle, no prior, no odometry), the
+    layout above. One common object fixes the teammate only on a circle around the ball; left
+    and right of me are mirror images neither robot can tell apart while both look at the ball
+    (``look_for_teammate = False``: the grid keeps at least 20 % of its mass away from the
+    truth). Looking for the teammate (the default) finds it or finds its absence where the
+    mirror hypothesis would put it: within 20 ticks (each robot's first look, staggered by 1 s)
+    each estimate is within 0.1 m and resolved."""
+    cfg = VisionWorldConfig(
+        robots=(RobotStart(0.0, 0.3), RobotStart(0.0, -0.3)),
+        objects=(FieldObject("ball", 1.5, 0.0),),
+        seed=5,
+    )
+    world, brains = _still_run(cfg, VisionAgentConfig(look_for_teammate=False), ticks=12)
+    for i, brain in enumerate(brains):
+        grid = brain._grids[1 - i]
+        truth = math.atan2(world.pose[1 - i, 1] - 0.0, world.pose[1 - i, 0] - 1.5)
+        near = np.abs((grid.gamma_rad - truth + math.pi) % (2 * math.pi) - math.pi) < 0.3
+        assert grid.weights[~near].sum() > 0.2, grid.weights[~near].sum()
+    world, brains = _still_run(cfg, VisionAgentConfig(), ticks=20)
+    for i, brain in enumerate(brains):
+        truth = _in_body(world.pose[i], world.pose[1 - i, :2])
+        est = brain.estimates().teammates[1 - i]
+        assert np.hypot(*(np.array(est) - truth)) < 0.1, (i, est, truth)
+        assert brain.teammate_resolved(1 - i)
 
 
 def test_relative_heading_from_two_common_objects():
@@ -237,14 +269,16 @@ def test_relative_heading_from_two_common_objects():
         seed=4,
     )
     errors = {}
-    for mode in ("objects", "odometry"):
-        agent = VisionAgentConfig(relative_heading=mode, assign_wait_s=100.0)
+    for mode in ("objects", "odometry", "perception"):
+        extra = {**PRIOR, "relative_heading": mode} if mode != "perception" else {}
+        agent = VisionAgentConfig(**extra, assign_wait_s=100.0, look_for_teammate=False)
         world, brains = _still_run(cfg, agent, ticks=6)
         est = brains[0].estimates().teammates[1]
         errors[mode] = float(
             np.hypot(*(np.array(est) - _in_body(world.pose[0], world.pose[1, :2])))
         )
     assert errors["objects"] < 0.1, errors
+    assert errors["perception"] < 0.1, errors  # the grid's second common object (Fig. 2)
     assert errors["odometry"] > 0.2, errors
 
 

@@ -91,6 +91,15 @@ from swarmloc.agents.vision.cooperative import (
     wrap_rad,
 )
 from swarmloc.agents.vision.detection import COLOUR_CLASSES, detect_blobs
+from swarmloc.agents.vision.heading import (
+    DirectionGrid,
+    heading_of,
+    in_view,
+    object_likelihood,
+    ring,
+    sighting_likelihood,
+    to_frame,
+)
 from swarmloc.agents.vision.potential_field import (
     BALL,
     OBSTACLE,
@@ -117,7 +126,12 @@ FOV_TOLERANCE_RAD = 0.02
 GOAL_COLOURS = {BALL: "pink", OBSTACLE: "orange"}
 TEAMMATE_COLOUR = "yellow"
 _COMMON_COLOURS = ("pink", "orange", "blue")
+#: Perception mode: common objects, anchor preference first (the obstacle: then the teammate's
+#: distance to it, which the goal rule compares, is its own measurement, not a hypothesis).
+_ANCHOR_COLOURS = (("orange", "obstacle"), ("pink", "ball"))
 _SHARE_KEYS = ("v", "id", "t", "pan", "odom", "det")
+#: Ways of getting a teammate's heading relative to mine (module docstring).
+RELATIVE_HEADING_MODES = ("perception", "odometry", "objects")
 
 
 # -- configuration ------------------------------------------------------------------------------
@@ -129,8 +143,23 @@ class VisionAgentConfig:
 
     sharing: bool = True
     window_s: float = FRESH_WINDOW_S
-    relative_heading: str = "odometry"  # or "objects"
-    initial_relative_heading_rad: float = 0.0
+    #: "perception" (the paper: shared detections and neck angles only), or the additions
+    #: "odometry" / "objects", which need ``initial_relative_heading_rad`` and ``shared_odometry``.
+    relative_heading: str = "perception"
+    #: Addition beyond the paper: the robots' relative heading at the start (parallel start: 0).
+    initial_relative_heading_rad: float | None = None
+    #: Addition beyond the paper: each payload carries the sender's odometry pose.
+    shared_odometry: bool = False
+    #: Perception mode: bins of the direction grid, miss likelihood of negative information,
+    #: spread of a sighting / object check, and whether the head looks for an unresolved teammate.
+    heading_bins: int = 72
+    miss_likelihood: float = 0.3
+    match_sigma_m: float = 0.08
+    look_for_teammate: bool = True
+    resolved_mass: float = 0.8
+    #: Without sharing: "nearest-seen" (each robot takes the nearest goal it sees, or applies the
+    #: rule among the teammates it sees).
+    alone_goal: str = "nearest-seen"
     consistency_tolerance_m: float = 0.3
     pair_tolerance_s: float = 0.06
     max_clock_skew_s: float = 0.05
@@ -150,10 +179,34 @@ class VisionAgentConfig:
     def __post_init__(self) -> None:
         if not isinstance(self.sharing, bool):
             raise ValueError(f"sharing: must be true or false, got {self.sharing!r}")  # noqa: TRY004
-        if self.relative_heading not in ("odometry", "objects"):
+        if self.relative_heading not in RELATIVE_HEADING_MODES:
             raise ValueError(
-                f"relative_heading: must be 'odometry' or 'objects', got {self.relative_heading!r}"
+                f"relative_heading: must be one of {list(RELATIVE_HEADING_MODES)}, "
+                f"got {self.relative_heading!r}"
             )
+        if not isinstance(self.shared_odometry, bool):
+            raise ValueError("shared_odometry: must be true or false")  # noqa: TRY004
+        if self.relative_heading != "perception" and (
+            self.initial_relative_heading_rad is None or not self.shared_odometry
+        ):
+            raise ValueError(
+                f"relative_heading: {self.relative_heading!r} is an addition beyond seed 004 that "
+                "needs initial_relative_heading_rad (a number) and shared_odometry = true"
+            )
+        if self.alone_goal not in ("nearest-seen",):
+            raise ValueError(f"alone_goal: must be 'nearest-seen', got {self.alone_goal!r}")
+        if (
+            isinstance(self.heading_bins, bool)
+            or not isinstance(self.heading_bins, int)
+            or not 8 <= self.heading_bins <= 720
+        ):
+            raise ValueError(f"heading_bins: must be an integer in 8..720, got {self.heading_bins!r}")
+        if not 0.0 < self.miss_likelihood <= 1.0:
+            raise ValueError(f"miss_likelihood: must be in (0, 1], got {self.miss_likelihood!r}")
+        if not self.match_sigma_m > 0.0:
+            raise ValueError(f"match_sigma_m: must be > 0, got {self.match_sigma_m!r}")
+        if not 0.0 < self.resolved_mass <= 1.0:
+            raise ValueError(f"resolved_mass: must be in (0, 1], got {self.resolved_mass!r}")
         for name in (
             "window_s",
             "consistency_tolerance_m",
@@ -179,7 +232,7 @@ class VisionAgentConfig:
         for name in ("window_s", "scan_period_s"):
             if getattr(self, name) <= 0.0:
                 raise ValueError(f"{name}: must be > 0, got {getattr(self, name)!r}")
-        if (
+        if self.initial_relative_heading_rad is not None and (
             not math.isfinite(self.initial_relative_heading_rad)
             or abs(self.initial_relative_heading_rad) > math.pi
         ):
@@ -304,7 +357,7 @@ class SharedFrame:
     robot_id: int
     time_s: float
     head_pan_rad: float
-    odometry_pose: tuple[float, float, float]
+    odometry_pose: tuple[float, float, float] | None  # None: odometry not shared (the paper)
     detections: tuple[Detection, ...]
 
 
@@ -317,7 +370,9 @@ def encode_share(frame: SharedFrame) -> bytes:
             "id": int(frame.robot_id),
             "t": float(frame.time_s),
             "pan": float(frame.head_pan_rad),
-            "odom": [float(v) for v in frame.odometry_pose],
+            "odom": (
+                None if frame.odometry_pose is None else [float(v) for v in frame.odometry_pose]
+            ),
             "det": [
                 [d.colour, float(d.bearing_rad), float(d.size_px), float(d.distance_m)]
                 for d in frame.detections[:MAX_SHARED_DETECTIONS]
@@ -404,13 +459,16 @@ def decode_share(
         "pan", wire["pan"], lo=-camera.pan_limit_rad - 1e-9, hi=camera.pan_limit_rad + 1e-9
     )
     odom = wire["odom"]
-    if not isinstance(odom, list) or len(odom) != 3:
-        raise ValueError("odom: expected [x_m, y_m, heading_rad]")
-    odometry = (
-        _number("odom[0]", odom[0], -MAX_ODOMETRY_M, MAX_ODOMETRY_M),
-        _number("odom[1]", odom[1], -MAX_ODOMETRY_M, MAX_ODOMETRY_M),
-        _number("odom[2]", odom[2], -math.pi, math.pi),
-    )
+    if odom is None:  # the sender does not share its odometry (seed 004 shares none)
+        odometry = None
+    else:
+        if not isinstance(odom, list) or len(odom) != 3:
+            raise ValueError("odom: expected [x_m, y_m, heading_rad] or nil")
+        odometry = (
+            _number("odom[0]", odom[0], -MAX_ODOMETRY_M, MAX_ODOMETRY_M),
+            _number("odom[1]", odom[1], -MAX_ODOMETRY_M, MAX_ODOMETRY_M),
+            _number("odom[2]", odom[2], -math.pi, math.pi),
+        )
     det = wire["det"]
     if not isinstance(det, list):
         raise ValueError(f"det: expected a list, got {type(det).__name__}")  # noqa: TRY004
@@ -524,6 +582,14 @@ class VisionBrain:
             i: deque() for i in self.teammate_ids
         }
         self._landmarks: dict[str, tuple[float, np.ndarray, str]] = {}
+        self._own_sightings: dict[str, tuple[float, np.ndarray]] = {}
+        # Perception mode: the direction grid and the pose estimates (time, xy, heading,
+        # resolved) of each teammate, in my odometry frame.
+        self._grids = {i: DirectionGrid(config.heading_bins) for i in self.teammate_ids}
+        self._poses: dict[int, deque[tuple[float, np.ndarray, float, bool]]] = {
+            i: deque() for i in self.teammate_ids
+        }
+        self._look: tuple[float, float] | None = None  # (until time_s, body bearing_rad)
         self._teammates_now: dict[int, np.ndarray] = {}
         self.goal: str | None = None
         self.reached = False
@@ -542,7 +608,7 @@ class VisionBrain:
                 self.robot_id,
                 f.time_s,
                 f.head_pan_rad,
-                tuple(float(v) for v in f.pose),
+                tuple(float(v) for v in f.pose) if self.config.shared_odometry else None,
                 tuple(f.detections),
             )
         )
@@ -592,7 +658,10 @@ class VisionBrain:
         self._record_sightings(frame)
         if cfg.sharing:
             for tid in self.teammate_ids:
-                self._pair(tid)
+                if cfg.relative_heading == "perception":
+                    self._pair_perception(tid)
+                else:
+                    self._pair(tid)
         self._update_teammates()
         self._update_landmarks(frame)
         self._assign()
@@ -627,10 +696,15 @@ class VisionBrain:
                 sightings.popleft()
             while links and links[0][0] < link_horizon:
                 links.popleft()
+            poses = self._poses[tid]
+            while poses and poses[0][0] < link_horizon:
+                poses.popleft()
             self._unpaired[tid] = [f for f in self._unpaired[tid] if f.time_s >= horizon]
         memory = self.now_s - self.config.landmark_memory_s
         for name in [k for k, v in self._landmarks.items() if v[0] < memory]:
             del self._landmarks[name]
+        for name in [k for k, v in self._own_sightings.items() if v[0] < memory]:
+            del self._own_sightings[name]
 
     def _my_frame_at(self, time_s: float) -> _Frame | None:
         best = None
@@ -650,8 +724,28 @@ class VisionBrain:
 
     # -- teammates ------------------------------------------------------------------------------
 
+    def _pose_at(self, tid: int, time_s: float) -> tuple[np.ndarray, float] | None:
+        """Teammate ``tid``'s estimated (position, heading) in my odometry frame at ``time_s``."""
+        if self.config.relative_heading == "perception":
+            poses = self._poses[tid]
+            if not poses:
+                return None
+            best = min(poses, key=lambda p: abs(p[0] - time_s))
+            return best[1], best[2]
+        link = self._link(tid)
+        theirs = [f for f in self._theirs[tid] if f.odometry_pose is not None]
+        if link is None or not theirs:
+            return None
+        tau, phi = link
+        th = min(theirs, key=lambda f: abs(f.time_s - time_s))
+        xy = tau + _rot(phi) @ np.asarray(th.odometry_pose[:2])
+        return xy, float(wrap_rad(phi + th.odometry_pose[2]))
+
     def _predicted_in_frame(self, tid: int, frame: _Frame) -> np.ndarray | None:
-        """Teammate ``tid``'s estimated position in ``frame``'s body frame (from the links)."""
+        """Teammate ``tid``'s estimated position in ``frame``'s body frame."""
+        if self.config.relative_heading == "perception":
+            pose = self._pose_at(tid, frame.time_s)
+            return None if pose is None else _rot(-frame.pose[2]) @ (pose[0] - frame.pose[:2])
         link = self._link(tid)
         theirs = self._theirs[tid]
         if link is None or not theirs:
@@ -710,6 +804,8 @@ class VisionBrain:
                 if theirs.time_s > self.now_s - self.config.pair_tolerance_s:
                     keep.append(theirs)  # my frame of that time may still come
                 continue
+            if theirs.odometry_pose is None:
+                continue  # these modes need the teammate's odometry
             psi = self._relative_heading(mine, theirs)
             estimates = []
             for colour in _COMMON_COLOURS:
@@ -739,6 +835,100 @@ class VisionBrain:
             self._links[tid].append((theirs.time_s, tau, phi))
         self._unpaired[tid] = keep
 
+    def _common_objects(self, mine: _Frame, theirs: SharedFrame) -> list:
+        """``(colour, O in my odometry frame, teammate's detection)`` of each object the
+        teammate sees once and I see in ``mine`` or remember from my own sightings."""
+        out = []
+        for colour, name in _ANCHOR_COLOURS:
+            t = _unique(theirs.detections, colour)
+            if t is None:
+                continue
+            m = _unique(mine.detections, colour)
+            if m is not None:
+                out.append((colour, self._to_odom(mine.pose, m.position_m()), t))
+            elif name in self._own_sightings:  # remembered from my own frames, never relayed
+                out.append((colour, self._own_sightings[name][1], t))
+        return out
+
+    def _pair_perception(self, tid: int) -> None:
+        """The teammate's pose from shared detections alone (``heading``: the direction grid)."""
+        cfg, cam = self.config, self.camera
+        pending, keep = self._unpaired[tid], []
+        exclusive = len(self.teammate_ids) == 1
+        body_r = OBJECT_KINDS["teammate"].radius_m
+        for theirs in pending:
+            mine = self._my_frame_at(theirs.time_s)
+            if mine is None:
+                if theirs.time_s > self.now_s - cfg.pair_tolerance_s:
+                    keep.append(theirs)
+                continue
+            common = self._common_objects(mine, theirs)
+            if not common:
+                continue
+            grid = self._grids[tid]
+            colours = [c[0] for c in common]
+            if grid.anchor not in colours:
+                if grid.anchor is not None:  # gamma' = gamma + beta_new - beta_old
+                    grid.shift(float(wrap_rad(common[0][2].bearing_rad - grid.anchor_bearing_rad)))
+                grid.anchor = colours[0]
+            _, anchor_xy, anchor_t = common[colours.index(grid.anchor)]
+            if grid.time_s is not None:
+                dt = max(0.0, theirs.time_s - grid.time_s)
+                grid.diffuse(cfg.field.max_speed_mps * dt / max(anchor_t.distance_m, 0.3))
+            gammas = grid.gamma_rad
+            positions = ring(anchor_xy, anchor_t.distance_m, gammas)
+            headings = heading_of(gammas, anchor_t.bearing_rad)
+            likelihood = np.ones(len(gammas))
+            occluders = []
+            for colour, obj_xy, det in common:
+                occluders.append((_rot(-mine.pose[2]) @ (obj_xy - mine.pose[:2]), 0.1))
+                if colour != grid.anchor:  # Fig. 2: a second common object
+                    seen = to_frame(np.broadcast_to(obj_xy, positions.shape), positions, headings)
+                    likelihood *= object_likelihood(seen, det.position_m(), cfg.match_sigma_m)
+            # My view of the teammate, and the teammate's view of me (negative information).
+            mine_body = to_frame(positions, mine.pose[:2], mine.pose[2])
+            mine_yellow = [d.position_m() for d in mine.detections if d.colour == TEAMMATE_COLOUR]
+            visible = in_view(mine_body, mine.head_pan_rad, cam.half_fov_rad, body_r, occluders)
+            likelihood *= sighting_likelihood(
+                mine_body, mine_yellow, visible, cfg.match_sigma_m, cfg.miss_likelihood, exclusive
+            )
+            me_body = to_frame(np.broadcast_to(mine.pose[:2], positions.shape), positions, headings)
+            their_yellow = [d.position_m() for d in theirs.detections if d.colour == TEAMMATE_COLOUR]
+            their_occluders = [(d.position_m(), 0.1) for d in theirs.detections
+                               if d.colour != TEAMMATE_COLOUR]
+            their_visible = in_view(
+                me_body, theirs.head_pan_rad, cam.half_fov_rad, body_r, their_occluders
+            )
+            likelihood *= sighting_likelihood(
+                me_body, their_yellow, their_visible, cfg.match_sigma_m, cfg.miss_likelihood,
+                exclusive,
+            )
+            grid.update(likelihood)
+            grid.time_s = theirs.time_s
+            grid.anchor_bearing_rad = anchor_t.bearing_rad
+            gamma, mass = grid.mode()
+            phi = float(heading_of(gamma, anchor_t.bearing_rad))
+            estimates = [ring(anchor_xy, anchor_t.distance_m, np.array([gamma]))[0]]
+            for colour, obj_xy, det in common:
+                if colour != grid.anchor:
+                    estimates.append(obj_xy - _rot(phi) @ det.position_m())
+            for d in mine.detections:  # a direct sighting near the estimate
+                if d.colour == TEAMMATE_COLOUR:
+                    seen = self._to_odom(mine.pose, d.position_m())
+                    if np.hypot(*(seen - estimates[0])) <= cfg.sighting_gate_m:
+                        estimates.append(seen)
+            fused = fuse(estimates, cfg.consistency_tolerance_m)
+            xy = estimates[0] if fused is None else fused
+            self._poses[tid].append((theirs.time_s, xy, phi, mass >= cfg.resolved_mass))
+        self._unpaired[tid] = keep
+
+    def teammate_resolved(self, tid: int) -> bool | None:
+        """Perception mode: whether the teammate's direction is resolved (``None``: no estimate
+        yet, or another mode)."""
+        if self.config.relative_heading != "perception" or not self._poses.get(tid):
+            return None
+        return self._poses[tid][-1][3]
+
     def _link(self, tid: int) -> tuple[np.ndarray, float] | None:
         samples = list(self._links[tid])[-self.config.link_samples :]
         if not samples:
@@ -753,8 +943,16 @@ class VisionBrain:
     def _update_teammates(self) -> None:
         self._teammates_now = {}
         for tid in self.teammate_ids:
+            if self.config.sharing and self.config.relative_heading == "perception":
+                # The newer of the shared-perception estimate and my own last sighting.
+                # (forgotten when its payloads stop for longer than the window, as below)
+                latest = [(p[0], p[1]) for p in list(self._poses[tid])[-1:] if self._theirs[tid]]
+                latest += list(self._sightings[tid])[-1:]
+                if latest:
+                    self._teammates_now[tid] = self._to_body_now(max(latest, key=lambda e: e[0])[1])
+                continue
             link = self._link(tid) if self.config.sharing else None
-            if link is not None and self._theirs[tid]:
+            if link is not None and self._theirs[tid] and self._theirs[tid][-1].odometry_pose:
                 tau, phi = link
                 odom_xy = tau + _rot(phi) @ np.asarray(self._theirs[tid][-1].odometry_pose[:2])
                 self._teammates_now[tid] = self._to_body_now(odom_xy)
@@ -768,6 +966,9 @@ class VisionBrain:
             own = [d for d in frame.detections if d.colour == colour]
             if own:
                 nearest = min(own, key=lambda d: d.distance_m)
+                self._own_sightings[name] = (
+                    frame.time_s, self._to_odom(frame.pose, nearest.position_m())
+                )
                 self._landmarks[name] = (
                     frame.time_s,
                     self._to_odom(frame.pose, nearest.position_m()),
@@ -793,13 +994,11 @@ class VisionBrain:
                     continue
                 t_s = theirs[0].time_s
                 mine = self._my_frame_at(t_s)
-                link = self._link(tid)
-                if mine is None or link is None:
+                pose = self._pose_at(tid, t_s)
+                if mine is None or pose is None:
                     continue
-                teammate_body = self._predicted_in_frame(tid, mine)
-                psi = float(
-                    wrap_rad(link[1] + self._theirs[tid][-1].odometry_pose[2] - mine.pose[2])
-                )
+                teammate_body = _rot(-mine.pose[2]) @ (pose[0] - mine.pose[:2])
+                psi = float(wrap_rad(pose[1] - mine.pose[2]))
                 det = min(theirs, key=lambda d: d.distance_m)
                 obj = object_from_teammate(teammate_body, psi, det)  # eq. 2 (Fig. 3)
                 if obj is not None:
@@ -832,7 +1031,15 @@ class VisionBrain:
         # Wait (at most assign_wait_s from the first object seen) until every teammate is placed.
         waited = self.now_s - self._first_object_s >= self.config.assign_wait_s
         known = sorted(self._teammates_now)
-        if len(known) < len(self.teammate_ids) and not waited:
+        if not self.config.sharing:
+            # Alone (no shared detections): the rule among the teammates I see, else the
+            # nearest goal I see (alone_goal = "nearest-seen").
+            if not known:
+                seen = {k: float(np.hypot(*p)) for k, p in (("ball", ball), ("obstacle", obstacle))
+                        if p is not None}
+                self.goal = min(seen, key=lambda k: (seen[k], k != BALL))
+                return
+        elif len(known) < len(self.teammate_ids) and not waited:
             return
         ids = sorted([self.robot_id, *known])
         positions = [np.zeros(2) if i == self.robot_id else self._teammates_now[i] for i in ids]
@@ -848,6 +1055,9 @@ class VisionBrain:
             p = self._body(name)
             if p is not None and (self.goal is None or name != self.goal):
                 points.append(p)
+        look = self._look_for_teammate()
+        if look is not None:
+            return look
         if not points:  # nothing known: sweep the head (a triangle wave over the pan range)
             phase = (self.now_s / cfg.scan_period_s) % 1.0
             return cam.pan_limit_rad * 0.9 * (4.0 * abs(phase - 0.5) - 1.0)
@@ -858,6 +1068,48 @@ class VisionBrain:
         else:
             target = float(bearings[0])
         return float(np.clip(target, -cam.pan_limit_rad, cam.pan_limit_rad))
+
+    def _look_for_teammate(self) -> float | None:
+        """Perception mode, ``look_for_teammate``: while a teammate's direction is unresolved,
+        look for it (0.6 s in every 2 s, staggered by robot) at its most probable hypothesis that is out of view
+        now; the sighting, or its absence (negative information), narrows the grid."""
+        cfg, cam = self.config, self.camera
+        if not (cfg.sharing and cfg.relative_heading == "perception" and cfg.look_for_teammate):
+            return None
+        if self._look is not None and self.now_s < self._look[0]:
+            return self._look[1]
+        self._look = None
+        # Staggered by robot (teammates looking away at the same time share no object).
+        team = sorted([self.robot_id, *self.teammate_ids])
+        offset_s = 2.0 * team.index(self.robot_id) / len(team)
+        if ((self.now_s + offset_s) % 2.0) >= 0.6:
+            return None
+        best = None
+        for tid in self.teammate_ids:
+            grid, poses = self._grids[tid], self._poses[tid]
+            if not poses or poses[-1][3] or grid.anchor is None:
+                continue
+            name = dict(_ANCHOR_COLOURS)[grid.anchor]
+            if name not in self._own_sightings:
+                continue
+            theirs = _unique(self._theirs[tid][-1].detections, grid.anchor) if self._theirs[
+                tid] else None
+            if theirs is None:
+                continue
+            positions = ring(self._own_sightings[name][1], theirs.distance_m, grid.gamma_rad)
+            body = to_frame(positions, self.pose[:2], self.pose[2])
+            bearing = np.arctan2(body[:, 1], body[:, 0])
+            off_now = np.abs(wrap_rad(bearing - self.head_pan_rad))
+            usable = (np.abs(bearing) <= cam.pan_limit_rad) & (off_now > 0.7 * cam.half_fov_rad)
+            usable &= grid.weights >= 0.3 * grid.weights.max()
+            if usable.any():
+                k = int(np.argmax(np.where(usable, grid.weights, -1.0)))
+                if best is None or grid.weights[k] > best[0]:
+                    best = (float(grid.weights[k]), float(bearing[k]))
+        if best is None:
+            return None
+        self._look = (self.now_s + 0.6, best[1])
+        return best[1]
 
     def _detour(self, attraction: np.ndarray, repulsion_force: np.ndarray) -> np.ndarray:
         """The detour force (module docstring): sideways, on the side the repulsion leans to."""

@@ -114,6 +114,11 @@ class SetupConfig:
     ball_behind_m: tuple[float, float] = (0.6, 0.9)
     hidden_angle_rad: float = 0.03
     min_assignment_gap_m: float = 0.08
+    #: Robots in the row (experiments 1 and 2; experiment 3 has two, as in §IV-C).
+    robots: int = 2
+    #: Robot 1's true start heading is turned by this much: the error of the parallel-start
+    #: prior (``agent.initial_relative_heading_rad = 0``), an addition beyond the paper.
+    start_heading_error_rad: float = 0.0
 
     def __post_init__(self) -> None:
         if self.experiment not in (1, 2, 3):
@@ -138,6 +143,15 @@ class SetupConfig:
         _range("obstacle_between", self.obstacle_between, lo=0.0)
         if self.obstacle_between[1] > 1.0:
             raise ValueError("obstacle_between: fractions must lie in [0, 1]")
+        if isinstance(self.robots, bool) or not isinstance(self.robots, int) or not (
+            2 <= self.robots <= 8
+        ):
+            raise ValueError(f"robots: an integer in 2..8, got {self.robots!r}")
+        if self.robots > 2 and self.experiment == 3:
+            raise ValueError("robots: experiment 3 (§IV-C) has two robots, one of them blind")
+        if not (math.isfinite(self.start_heading_error_rad)
+                and abs(self.start_heading_error_rad) <= 1.0):
+            raise ValueError("start_heading_error_rad: must lie in [-1, 1] rad")
         if self.spacing_m[0] < 2 * OBJECT_KINDS["teammate"].radius_m + 2 * self.position_jitter_m:
             raise ValueError("spacing_m: robots could start overlapping")
 
@@ -255,14 +269,17 @@ def layout(scenario: VisionScenario, seed: int, max_tries: int = 2000) -> Layout
     for _ in range(max_tries):
         side = rng.choice([-1.0, 1.0])  # mirror image of the layout (which robot is on the left)
         spacing = rng.uniform(*s.spacing_m)
-        jitter = rng.uniform(-s.position_jitter_m, s.position_jitter_m, (2, 2))
-        heading = rng.uniform(-s.heading_jitter_rad, s.heading_jitter_rad, 2)
-        starts = np.array([[0.0, side * spacing / 2], [0.0, -side * spacing / 2]]) + jitter
+        n = s.robots
+        jitter = rng.uniform(-s.position_jitter_m, s.position_jitter_m, (n, 2))
+        heading = rng.uniform(-s.heading_jitter_rad, s.heading_jitter_rad, n)
+        heading[1] += s.start_heading_error_rad
+        row = side * spacing * ((n - 1) / 2.0 - np.arange(n))
+        starts = np.stack([np.zeros(n), row], -1) + jitter
         mid_y = float(starts[:, 1].mean())
         if s.experiment == 1:
             ball = (rng.uniform(*s.ball_distance_m), mid_y + rng.uniform(*s.ball_lateral_m))
             objects = [make_object("ball", *ball)]
-            goals = ("ball", "ball")
+            goals = ("ball",) * n
             blind, variant = -1, ""
         elif s.experiment == 2:
             obstacle_side = rng.choice([-1.0, 1.0])
@@ -295,16 +312,17 @@ def layout(scenario: VisionScenario, seed: int, max_tries: int = 2000) -> Layout
             objects = [make_object("ball", *ball), make_object("obstacle", *obstacle)]
             blind = 0
         if s.experiment in (2, 3):
-            d = [math.hypot(obstacle[0] - p[0], obstacle[1] - p[1]) for p in starts]
-            if abs(d[0] - d[1]) < s.min_assignment_gap_m:
+            d = sorted((math.hypot(obstacle[0] - p[0], obstacle[1] - p[1]), i)
+                       for i, p in enumerate(starts))
+            if d[1][0] - d[0][0] < s.min_assignment_gap_m:
                 continue
-            nearest = int(np.argmin(d))
-            goals = tuple("obstacle" if i == nearest else "ball" for i in range(2))
+            nearest = d[0][1]
+            goals = tuple("obstacle" if i == nearest else "ball" for i in range(n))
             variant = "a" if nearest == 1 else "b"
         # Start poses and head pans: each robot looks at the middle of the objects.
         robots, ok = [], True
         points = [o.centre_m for o in objects]
-        for i in range(2):
+        for i in range(n):
             pose = (float(starts[i, 0]), float(starts[i, 1]), float(heading[i]))
             if blind == i:
                 pan = _aim(pose, [o.centre_m for o in objects if o.kind == "obstacle"])
@@ -313,7 +331,7 @@ def layout(scenario: VisionScenario, seed: int, max_tries: int = 2000) -> Layout
             if abs(pan) > camera.pan_limit_rad:
                 ok = False
                 break
-            others = [make_object("teammate", *starts[1 - i])]
+            others = [make_object("teammate", *starts[j]) for j in range(n) if j != i]
             seen = _visible(pose, pan, objects + others, camera)
             wanted = {"pink"} | ({"orange"} if s.experiment in (2, 3) else set())
             if blind == i:
@@ -459,6 +477,7 @@ def run_vision(
     ticks_known_teammate = np.zeros(n, dtype=int)
     ticks_known_ball = np.zeros(n, dtype=int)
     blind_first_ball_s: float | None = None
+    resolved_ticks: list[bool | None] = []
     bad_images = bad_payloads = 0
     commands = [STOP] * n
     all_reached_since: float | None = None
@@ -490,6 +509,7 @@ def run_vision(
                 truth = world.relative_position(i, world.pose[j, :2])
                 teammate_err[i].append(float(np.hypot(*(np.asarray(xy) - truth))))
             ticks_known_teammate[i] += bool(est.teammates)
+            resolved_ticks += [brain.teammate_resolved(j) for j in est.teammates]
             if est.ball is not None:
                 err = float(np.hypot(*(np.asarray(est.ball) - world.relative_position(i, ball_xy))))
                 ball_err[i].append(err)
@@ -533,6 +553,13 @@ def run_vision(
         ):
             reach_time[i] = world.time_s
     goals = [b.goal for b in brains]
+    # The angle at the ball between robots 0 and 1 at the end (§IV-A: "they catch the ball
+    # from opposite sides"): 180 deg opposite, 0 deg one behind the other.
+    to_0 = world.pose[0, :2] - np.asarray(ball_xy)
+    to_1 = world.pose[1, :2] - np.asarray(ball_xy) if n > 1 else to_0
+    ball_angle_end_deg = round(math.degrees(abs(math.atan2(
+        to_0[0] * to_1[1] - to_0[1] * to_1[0], float(to_0 @ to_1)))), 1)
+    resolved = [r for r in resolved_ticks if r is not None]
 
     def _median(values):
         return round(float(np.median(values)), 4) if len(values) else None
@@ -548,6 +575,7 @@ def run_vision(
         "scenario": scenario.name,
         "sharing": agent_cfg.sharing,
         "seed": seed,
+        "robots": n,
         "variant": lay.variant,
         "collisions": world.robot_collisions,
         "contact_s": round(world.robot_contact_ticks * wcfg.tick_s, 3),
@@ -565,6 +593,10 @@ def run_vision(
         "ball_err_median_m": _median(all_ball),
         "ball_known_fraction": round(float(ticks_known_ball.sum()) / (n * ticks), 4),
         "blind_ball_first_s": blind_first_ball_s,
+        "ball_angle_end_deg": ball_angle_end_deg,
+        "heading_resolved_fraction": (
+            round(sum(resolved) / len(resolved), 4) if resolved else None
+        ),
         "blind_relayed_ball_err_median_m": _median(relayed_err),
         "bad_images": bad_images,
         "bad_payloads": bad_payloads,
