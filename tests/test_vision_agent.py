@@ -522,3 +522,39 @@ def test_cli(tmp_path, capsys):
     assert cli_main(["experiment", str(spec), "--set", "setup.experiment=4",
                      "--out", str(tmp_path / "y.csv")]) == 2
     assert not (tmp_path / "x.csv").exists() and not (tmp_path / "y.csv").exists()
+
+
+@pytest.mark.parametrize(
+    ("ball", "obstacle", "goal"),
+    [((1.0, 0.4), (1.8, 0.1), "ball"), ((1.8, 0.4), (1.0, 0.1), "obstacle")],
+)
+def test_without_sharing_a_robot_takes_the_nearest_goal_it_sees(ball, obstacle, goal):
+    """The no-sharing baseline is a behaviour, not a constant: robot 0, its teammate out of
+    view (beside it) and no detections shared, takes whichever goal it sees nearer, so swapping
+    the ball and the obstacle swaps its choice."""
+    cfg = VisionWorldConfig(
+        robots=(RobotStart(0.0, 0.3), RobotStart(0.0, -0.3)),
+        objects=(FieldObject("ball", *ball), FieldObject("obstacle", *obstacle)),
+        seed=3,
+    )
+    world, brains = _still_run(cfg, VisionAgentConfig(sharing=False), ticks=3)
+    assert not brains[0].estimates().teammates
+    assert brains[0].goal == goal
+
+
+def test_share_payload_without_odometry_round_trips_with_the_yellow_blobs():
+    """Seed 004 shares detections and the neck angle, not odometry: ``odom`` is nil unless the
+    addition ``shared_odometry`` is on; every yellow blob's bearing (``yb``) travels too."""
+    frame = SharedFrame(3, 1.5, 0.2, None, (), (0.1, 0.3))
+    back = decode_share(encode_share(frame), CAMERA, 3, 1.5)
+    assert back.odometry_pose is None and back.yellow_bearings == pytest.approx((0.1, 0.3))
+    with pytest.raises(ValueError, match="yb"):
+        decode_share(encode_share(SharedFrame(3, 1.5, 0.2, None, (), (2.0,))), CAMERA)
+
+
+def test_the_additions_need_both_the_prior_and_shared_odometry():
+    with pytest.raises(ValueError, match="addition beyond seed 004"):
+        VisionAgentConfig(relative_heading="odometry")
+    with pytest.raises(ValueError, match="addition beyond seed 004"):
+        VisionAgentConfig(relative_heading="objects", initial_relative_heading_rad=0.0)
+    assert VisionAgentConfig(**PRIOR).shared_odometry

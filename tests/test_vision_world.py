@@ -263,3 +263,32 @@ def test_bad_objects_and_commands_are_refused():
         world.step([])
     with pytest.raises(ValueError, match=r"commands\[0\]"):
         world.step([(0.1, 0.0, 0.0, 0.0)])
+
+
+def test_a_box_body_looks_wider_from_the_side_than_from_the_front():
+    """``robot_body = "box"`` (an AIBO-like 0.28 x 0.2 m body): the yellow blob of a robot 1.5 m
+    ahead is 2 f (0.2 / 2) / 1.5 = 25 px wide seen from its front and 2 f (0.28 / 2) / 1.5 = 35 px
+    from its side (within 2 px: pixel rounding); a cylinder shows 25 px from both."""
+    from swarmloc.agents.vision.detection import detect_blobs
+
+    widths = {}
+    for body in ("cylinder", "box"):
+        for heading in (math.pi, math.pi / 2):
+            cfg = VisionWorldConfig(
+                robots=(RobotStart(0.0, 0.0), RobotStart(1.5, 0.0, heading)),
+                objects=(),
+                robot_body=body,
+                camera=CameraParams(noise_sigma=0.0, gain_min=1.0, gain_max=1.0),
+                image_format="png",
+            )
+            world = VisionWorld(cfg)
+            image = cv2.imdecode(np.frombuffer(world.observe()[0].image, np.uint8),
+                                 cv2.IMREAD_COLOR)
+            (blob,) = [b for b in detect_blobs(image, cfg.camera) if b.colour == "yellow"]
+            widths[body, heading] = blob.width_px
+    assert widths["cylinder", math.pi] == pytest.approx(25.3, abs=2)
+    assert widths["cylinder", math.pi / 2] == widths["cylinder", math.pi]
+    assert widths["box", math.pi] == pytest.approx(25.3, abs=2)
+    assert widths["box", math.pi / 2] == pytest.approx(35.5, abs=2)
+    with pytest.raises(ValueError, match="robot_body"):
+        VisionWorldConfig(robot_body="sphere")

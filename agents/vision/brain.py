@@ -359,6 +359,8 @@ class SharedFrame:
     head_pan_rad: float
     odometry_pose: tuple[float, float, float] | None  # None: odometry not shared (the paper)
     detections: tuple[Detection, ...]
+    #: Body bearings of every yellow blob the sender saw, whole or not (optional on the wire).
+    yellow_bearings: tuple[float, ...] = ()
 
 
 def encode_share(frame: SharedFrame) -> bytes:
@@ -377,6 +379,7 @@ def encode_share(frame: SharedFrame) -> bytes:
                 [d.colour, float(d.bearing_rad), float(d.size_px), float(d.distance_m)]
                 for d in frame.detections[:MAX_SHARED_DETECTIONS]
             ],
+            "yb": [float(b) for b in frame.yellow_bearings[:MAX_SHARED_DETECTIONS]],
         },
         use_bin_type=True,
     )
@@ -438,7 +441,7 @@ def decode_share(
     for key in _SHARE_KEYS:
         if key not in wire:
             raise ValueError(f"{key}: missing field")
-    extra = sorted(str(k) for k in wire if k not in _SHARE_KEYS)
+    extra = sorted(str(k) for k in wire if k not in (*_SHARE_KEYS, "yb"))
     if extra:
         raise ValueError(f"{extra[0]}: unknown field")
     if wire["v"] != SHARE_VERSION or isinstance(wire["v"], bool):
@@ -493,7 +496,16 @@ def decode_share(
         size_px = _number(f"{where}.size_px", size_px, positive=True, hi=max_size_px)
         distance = _number(f"{where}.distance_m", distance, positive=True, hi=MAX_DISTANCE_M)
         detections.append(Detection(robot_id, time_s, colour, bearing, pan, size_px, distance))
-    return SharedFrame(robot_id, time_s, pan, odometry, tuple(detections))
+    yb = wire.get("yb", [])
+    if not isinstance(yb, list) or len(yb) > MAX_SHARED_DETECTIONS:
+        raise ValueError(f"yb: expected a list of at most {MAX_SHARED_DETECTIONS} bearings")
+    yellow = []
+    for i, b in enumerate(yb):
+        b = _number(f"yb[{i}]", b, -math.pi, math.pi)
+        if abs(float(wrap_rad(b - pan))) > half_fov:
+            raise ValueError(f"yb[{i}]: {b:.3f} rad is outside the camera's field of view")
+        yellow.append(b)
+    return SharedFrame(robot_id, time_s, pan, odometry, tuple(detections), tuple(yellow))
 
 
 # -- what the brain reports ---------------------------------------------------------------------
@@ -524,11 +536,24 @@ class _Frame:
     pose: np.ndarray  # odometry pose (3,)
     head_pan_rad: float
     detections: list[Detection]
+    #: Body bearings of every yellow blob, whole or not (negative information needs them).
+    yellow_bearings: tuple[float, ...] = ()
 
 
 def _rot(theta: float) -> np.ndarray:
     c, s = math.cos(theta), math.sin(theta)
     return np.array([[c, -s], [s, c]])
+
+
+def _near_blob(positions_body: np.ndarray, bearings_rad) -> np.ndarray:
+    """Hypotheses at a bearing where some yellow blob was seen, whole or not: no negative
+    information there (a box seen from the side fails the shape check but is there)."""
+    if not bearings_rad:
+        return np.zeros(len(positions_body), dtype=bool)
+    hyp = np.arctan2(positions_body[:, 1], positions_body[:, 0])
+    gap = np.abs(wrap_rad(hyp[:, None] - np.asarray(bearings_rad)[None, :]))
+    half = np.arctan2(0.2, np.maximum(np.hypot(positions_body[:, 0], positions_body[:, 1]), 0.1))
+    return (gap <= half[:, None] + 0.05).any(axis=1)
 
 
 def _unique(detections, colour: str) -> Detection | None:
@@ -610,6 +635,7 @@ class VisionBrain:
                 f.head_pan_rad,
                 tuple(float(v) for v in f.pose) if self.config.shared_odometry else None,
                 tuple(f.detections),
+                f.yellow_bearings,
             )
         )
 
@@ -650,7 +676,9 @@ class VisionBrain:
 
         blobs = detect_blobs(image, self.camera)
         frame = _Frame(
-            now, pose, pan, detections_from_blobs(blobs, self.robot_id, now, pan, self.camera)
+            now, pose, pan, detections_from_blobs(blobs, self.robot_id, now, pan, self.camera),
+            tuple(float(wrap_rad(pan + b.bearing_rad)) for b in blobs
+                  if b.colour == TEAMMATE_COLOUR)[:MAX_SHARED_DETECTIONS],
         )
         self._frames.append(frame)
         self._last = frame
@@ -889,6 +917,7 @@ class VisionBrain:
             mine_body = to_frame(positions, mine.pose[:2], mine.pose[2])
             mine_yellow = [d.position_m() for d in mine.detections if d.colour == TEAMMATE_COLOUR]
             visible = in_view(mine_body, mine.head_pan_rad, cam.half_fov_rad, body_r, occluders)
+            visible &= ~_near_blob(mine_body, mine.yellow_bearings)
             likelihood *= sighting_likelihood(
                 mine_body, mine_yellow, visible, cfg.match_sigma_m, cfg.miss_likelihood, exclusive
             )
@@ -899,6 +928,7 @@ class VisionBrain:
             their_visible = in_view(
                 me_body, theirs.head_pan_rad, cam.half_fov_rad, body_r, their_occluders
             )
+            their_visible &= ~_near_blob(me_body, theirs.yellow_bearings)
             likelihood *= sighting_likelihood(
                 me_body, their_yellow, their_visible, cfg.match_sigma_m, cfg.miss_likelihood,
                 exclusive,

@@ -140,6 +140,10 @@ class SceneObject:
     centre_m: tuple[float, float]
     radius_m: float
     height_m: float
+    #: A box instead of a cylinder (an AIBO-like robot body, ``VisionWorldConfig.robot_body``):
+    #: ``length_m`` along ``heading_rad``, width ``2 radius_m``. ``None``: a cylinder.
+    length_m: float | None = None
+    heading_rad: float = 0.0
 
     def __post_init__(self) -> None:
         if self.kind not in OBJECT_KINDS:
@@ -155,6 +159,12 @@ class SceneObject:
         object.__setattr__(self, "centre_m", (float(centre[0]), float(centre[1])))
         _finite_positive("radius_m", self.radius_m)
         _finite_positive("height_m", self.height_m)
+        if self.length_m is not None:
+            _finite_positive("length_m", self.length_m)
+            if self.is_sphere:
+                raise ValueError("length_m: a ball is not a box")
+        if not math.isfinite(self.heading_rad):
+            raise ValueError(f"heading_rad must be finite, got {self.heading_rad!r}")
         if self.is_sphere and not math.isclose(self.height_m, 2.0 * self.radius_m):
             raise ValueError(
                 f"height_m of a ball must be 2 * radius_m = {2.0 * self.radius_m!r}, "
@@ -164,6 +174,16 @@ class SceneObject:
     @property
     def is_sphere(self) -> bool:
         return OBJECT_KINDS[self.kind].shape == "sphere"
+
+    def half_width_m(self, sight_yaw_rad: float) -> float:
+        """Half the width the object shows across a line of sight of yaw ``sight_yaw_rad``
+        (world frame): its radius for a ball or a cylinder; for a box of length ``L`` and width
+        ``W`` at relative angle ``a`` to the sight line, ``(L |sin a| + W |cos a|) / 2`` (its
+        silhouette drawn at the depth of its centre)."""
+        if self.length_m is None:
+            return self.radius_m
+        a = self.heading_rad - sight_yaw_rad
+        return 0.5 * (self.length_m * abs(math.sin(a)) + 2.0 * self.radius_m * abs(math.cos(a)))
 
 
 def make_object(kind: str, x_m: float, y_m: float) -> SceneObject:
@@ -180,7 +200,8 @@ def project(
     """``(u_px, v_px, radius_px, depth_m)`` of ``obj``'s centre; depth <= 0 means behind.
 
     ``u_px, v_px`` are the image of the object's centre (the sphere's centre, or the cylinder's
-    axis at half its height); ``radius_px = focal_px * radius_m / depth_m``.
+    axis at half its height); ``radius_px = focal_px * half width / depth_m`` (the half width
+    is ``radius_m`` except for a box, :meth:`SceneObject.half_width_m`).
     """
     x_m, y_m, heading_rad = camera_pose
     yaw_rad = heading_rad + pan_rad
@@ -194,7 +215,8 @@ def project(
     centre_height_m = obj.radius_m if obj.is_sphere else obj.height_m / 2.0
     u_px = params.cx_px - scale * left_m
     v_px = params.cy_px + scale * (params.camera_height_m - centre_height_m)
-    return u_px, v_px, scale * obj.radius_m, depth_m
+    half_width_m = obj.half_width_m(math.atan2(dy_m, dx_m))
+    return u_px, v_px, scale * half_width_m, depth_m
 
 
 def _pixel_span(lo: float, hi: float, size: int) -> tuple[int, int]:

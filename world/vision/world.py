@@ -41,6 +41,7 @@ Coordinates: metres, radians, counter-clockwise; a robot's body frame has x forw
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
@@ -64,6 +65,10 @@ CONTACT_MARGIN_M = 1e-3
 #: Physical bodies (robots collide with them); the ball is not one.
 _SOLID_KINDS = ("obstacle", "rival", "beacon")
 _IMAGE_FORMATS = {"jpeg": ".jpg", "png": ".png"}
+#: Robot bodies (``VisionWorldConfig.robot_body``) and the box's length: an AIBO ERS-7 is about
+#: 0.28 m long; its width here is the cylinder's diameter, 0.2 m.
+ROBOT_BODIES = ("cylinder", "box")
+BOX_LENGTH_M = 0.28
 
 
 def _finite(
@@ -155,6 +160,11 @@ class VisionWorldConfig:
     camera: CameraParams = field(default_factory=CameraParams)
     image_format: str = "jpeg"
     jpeg_quality: int = 90
+    #: How robots look to each other: ``"cylinder"`` (the same width from every side) or
+    #: ``"box"``, an AIBO-like body ``BOX_LENGTH_M`` long and ``2 body_radius_m`` wide, whose
+    #: apparent width (hence size-based distance) depends on which way it faces. Bodies collide
+    #: as discs of ``body_radius_m`` in both cases.
+    robot_body: str = "cylinder"
 
     def __post_init__(self) -> None:
         robots = tuple(self.robots)
@@ -201,6 +211,10 @@ class VisionWorldConfig:
         ):
             raise ValueError(
                 f"jpeg_quality: must be an integer in 10..100, got {self.jpeg_quality!r}"
+            )
+        if self.robot_body not in ROBOT_BODIES:
+            raise ValueError(
+                f"robot_body: must be one of {list(ROBOT_BODIES)}, got {self.robot_body!r}"
             )
         # No two bodies may start overlapping.
         centres, radii, names = [], [], []
@@ -348,6 +362,11 @@ class VisionWorld:
             for j in range(self.n_robots)
             if j != index
         ]
+        if self.config.robot_body == "box":
+            others = [
+                dataclasses.replace(o, length_m=BOX_LENGTH_M, heading_rad=float(self.pose[j, 2]))
+                for o, j in zip(others, [j for j in range(self.n_robots) if j != index])
+            ]
         return self._scene + others
 
     def render(self, index: int) -> np.ndarray:
