@@ -67,7 +67,7 @@ def test_list_shows_every_shipped_spec_of_every_family(capsys):
     listed = {name: (family, jobs) for name, family, jobs, _ in list_specs()}
     assert set(listed) == set(shipped_specs())
     assert {f for f, _ in listed.values()} == {"epuck", "laser", "vision", "replay"}
-    assert listed["vision"] == ("vision", 3 * 2 * 30 + 3 * 10 + 10)
+    assert listed["vision"] == ("vision", 3 * 2 * 30 + 2 * 3 * 3 * 30 + 3 * 2 * 30 + 4 * 30)
     # global: 4 algorithms x alone/coop x 40 seeds; deterministic: 3 x 2; kidnap: 4 x 2 x 3
     # seeds; stochastic: 3 x 2 x 3 seeds; reference: 2 x 2 x 2 calibrations; each camera on
     # its own readings: the hybrid cooperative from an unknown start (40 seeds), the

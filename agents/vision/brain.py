@@ -16,14 +16,19 @@ state) that runs inside an agent process or inside the in-process runner
    bearing, are wrong); a ball cut by the image edge keeps the larger of its equal-area radius and
    half its width (a ball cut at the bottom keeps its full width).
 2. **Telepathy** (§III): :meth:`VisionBrain.share` packs this frame's detections, with the head
-   angle ("the angle of the neck"), the time, and the robot's odometry pose, into a msgpack
-   payload (:func:`encode_share`); :meth:`VisionBrain.receive` decodes a teammate's payload with
+   angle ("the angle of the neck") and the time (and the odometry pose only with the addition
+   ``shared_odometry``), into a msgpack payload (``telepathy.encode_share``); :meth:`VisionBrain.receive` decodes a teammate's payload with
    :func:`decode_share`, which rejects impossible values with ``ValueError`` naming the field:
    NaN or infinite numbers, a negative or zero size or distance, a bearing outside the camera's
    field of view, a time in the future, a sender that is not who it claims to be, an unknown
    colour. Detections older than the window (2 s, §III) are dropped (``cooperative.fresh``).
-3. **Cooperative localization** (§II, eq. 1 and 2): a teammate's frame is paired with my own
-   frame of the same time; for each colour both see exactly once (ball, obstacle, beacon) the
+3. **Cooperative localization** (§II, eq. 1 and 2). ``relative_heading = "perception"`` (the
+   default, the paper's information only): a teammate's frame is paired with my own frame of the
+   same time; one common object puts the teammate on a circle around it, and the direction grid
+   of ``swarmloc.agents.vision.heading`` (a Markov filter, §II) narrows it with a second common
+   object (Fig. 2), sightings of yellow blobs by either robot and negative information; while
+   the direction is unresolved the head looks for the teammate. With the additions ``"odometry"``
+   / ``"objects"`` (below), for each colour both see exactly once (ball, obstacle, beacon) the
    teammate's position in my body frame follows by stereo (eq. 1,
    ``cooperative.stereo_relative_position``), or by the law of cosines (eq. 2,
    ``teammate_from_common_object``) where stereo has no disparity; a direct sighting of the
@@ -43,13 +48,24 @@ With sharing off the robot uses only what it sees: a teammate is known only whil
 
 Choices where the paper is silent
 ---------------------------------
-- **Relative heading.** One common object fixes a teammate's position only when the two robots'
-  headings are related (see ``cooperative``). The robots start with known relative heading
-  ``initial_relative_heading_rad`` (0: side by side and parallel, as in §IV's set-ups) and share
-  their odometry, so ``psi(t) = psi0 + theta_teammate_odo(t) - theta_mine_odo(t)``
-  (``relative_heading = "odometry"``, the default). With ``"objects"``, two objects seen in
-  common give psi directly (``relative_heading_from_two_objects``, Fig. 2), else odometry is used.
-- **Tracking a moving teammate.** Each paired measurement gives the transform between the
+- **Relative heading.** Seed 004 §IV-A: "The information that they are sharing is the position
+  of the ball respect to each AIBO, and the angle of the neck. With this information, they can
+  estimate the position of the other AIBO". One common object fixes a teammate's position only
+  up to a circle (``heading``). The default, ``"perception"``, resolves it from perception alone
+  (§II: "statistical tools like Markov Fields", negative information; §III: "triangulation is
+  used to reduce ambiguity"); how the head looks for an unresolved teammate (0.6 s in every 2 s,
+  staggered by robot) is not in the paper. **Additions beyond the paper**, off in the
+  reproduction specs: ``"odometry"`` assumes the relative heading at the start,
+  ``initial_relative_heading_rad`` (0: the parallel start of §IV's figures), and follows it with
+  both robots' odometry, carried in every payload (``shared_odometry``):
+  ``psi(t) = psi0 + theta_teammate_odo(t) - theta_mine_odo(t)``; ``"objects"`` takes psi from two
+  common objects (``relative_heading_from_two_objects``, Fig. 2), else as ``"odometry"``.
+- **Without sharing** (``sharing = false``; the paper only shows Fig. 6a, the robots "cannot
+  avoid each other without position estimation"): a robot knows a teammate only while it sees
+  it; it applies the goal rule among the teammates it sees, and if it sees none it takes the
+  nearest goal it sees (``alone_goal = "nearest-seen"``), so the contrast with sharing is
+  measured, not built in.
+- **Tracking a moving teammate** (``"odometry"`` / ``"objects"``). Each paired measurement gives the transform between the
   teammate's odometry frame and mine (nearly constant: it drifts only with odometry error). The
   brain takes the median of the last ``link_samples`` transforms (no older than
   ``link_memory_s``) and applies it to the teammate's latest shared odometry pose, so the estimate
@@ -75,8 +91,6 @@ import math
 from collections import deque
 from dataclasses import dataclass, field
 
-import cv2
-import msgpack
 import numpy as np
 
 from swarmloc.agents.vision.cooperative import (
@@ -90,7 +104,12 @@ from swarmloc.agents.vision.cooperative import (
     teammate_from_common_object,
     wrap_rad,
 )
-from swarmloc.agents.vision.detection import COLOUR_CLASSES, detect_blobs
+from swarmloc.agents.vision.detection import detect_blobs
+from swarmloc.agents.vision.frames import (  # noqa: F401 -- re-exported
+    MAX_IMAGE_BYTES,
+    decode_image,
+    detections_from_blobs,
+)
 from swarmloc.agents.vision.heading import (
     DirectionGrid,
     heading_of,
@@ -107,21 +126,19 @@ from swarmloc.agents.vision.potential_field import (
     assign_goals,
     potential_field,
 )
+from swarmloc.agents.vision.telepathy import (  # noqa: F401 -- re-exported
+    MAX_ROBOT_ID,
+    MAX_SHARE_BYTES,
+    MAX_SHARED_DETECTIONS,
+    SHARE_VERSION,
+    SharedFrame,
+    _number,
+    decode_share,
+    encode_share,
+)
 from swarmloc.world.vision.camera import OBJECT_KINDS, CameraParams
 from swarmloc.world.vision.world import VisionCommand, VisionObservation
 
-#: Version of the shared-detections payload.
-SHARE_VERSION = 1
-#: Upper bound on one shared-detections payload and on its number of detections.
-MAX_SHARE_BYTES = 8 * 1024
-MAX_SHARED_DETECTIONS = 64
-#: Upper bound on an encoded camera frame.
-MAX_IMAGE_BYTES = 2 * 1024 * 1024
-MAX_ROBOT_ID = 65535
-MAX_DISTANCE_M = 100.0
-MAX_ODOMETRY_M = 1.0e6
-#: Slack on the field-of-view check of a shared bearing (rounding, blob centroid at the edge).
-FOV_TOLERANCE_RAD = 0.02
 #: Colour of each goal kind, and of teammates (seed 004 §III).
 GOAL_COLOURS = {BALL: "pink", OBSTACLE: "orange"}
 TEAMMATE_COLOUR = "yellow"
@@ -129,7 +146,6 @@ _COMMON_COLOURS = ("pink", "orange", "blue")
 #: Perception mode: common objects, anchor preference first (the obstacle: then the teammate's
 #: distance to it, which the goal rule compares, is its own measurement, not a hypothesis).
 _ANCHOR_COLOURS = (("orange", "obstacle"), ("pink", "ball"))
-_SHARE_KEYS = ("v", "id", "t", "pan", "odom", "det")
 #: Ways of getting a teammate's heading relative to mine (module docstring).
 RELATIVE_HEADING_MODES = ("perception", "odometry", "objects")
 
@@ -251,261 +267,6 @@ class VisionAgentConfig:
             )
         if not isinstance(self.field, FieldParams):
             raise ValueError("field: expected a FieldParams table")  # noqa: TRY004
-
-
-# -- image decoding -----------------------------------------------------------------------------
-
-
-def decode_image(payload, camera: CameraParams) -> np.ndarray:
-    """The BGR frame of an encoded (JPEG or PNG) ``payload``; ``ValueError`` naming the problem
-    if it is not bytes, is empty or too large, does not decode, or has the wrong size."""
-    if not isinstance(payload, (bytes, bytearray, memoryview)):
-        raise ValueError(f"image: expected bytes, got {type(payload).__name__}")  # noqa: TRY004
-    size = payload.nbytes if isinstance(payload, memoryview) else len(payload)
-    if size == 0:
-        raise ValueError("image: empty payload")
-    if size > MAX_IMAGE_BYTES:
-        raise ValueError(f"image: {size} bytes exceeds the limit of {MAX_IMAGE_BYTES} bytes")
-    image = cv2.imdecode(np.frombuffer(payload, dtype=np.uint8), cv2.IMREAD_COLOR)
-    if image is None:
-        raise ValueError(f"image: {size} bytes do not decode as an image (JPEG or PNG expected)")
-    if image.shape[:2] != (camera.height_px, camera.width_px):
-        raise ValueError(
-            f"image: decodes to {image.shape[1]} x {image.shape[0]} px, expected "
-            f"{camera.width_px} x {camera.height_px} px (W x H)"
-        )
-    return image
-
-
-#: Height over width of each colour's upright cylinder in the image (height_m / (2 radius_m)).
-_CYLINDER_ASPECT = {
-    "yellow": OBJECT_KINDS["teammate"].height_m / (2.0 * OBJECT_KINDS["teammate"].radius_m),
-    "orange": OBJECT_KINDS["obstacle"].height_m / (2.0 * OBJECT_KINDS["obstacle"].radius_m),
-    "blue": OBJECT_KINDS["beacon"].height_m / (2.0 * OBJECT_KINDS["beacon"].radius_m),
-}
-
-
-def _shape_agrees(measured_px: float, expected_px: float, tolerance: float) -> bool:
-    return abs(measured_px - expected_px) <= max(1.0, tolerance * expected_px)
-
-
-def detections_from_blobs(
-    blobs,
-    robot_id: int,
-    time_s: float,
-    head_pan_rad: float,
-    camera: CameraParams,
-    shape_tolerance: float = 0.15,
-) -> list[Detection]:
-    """Body-frame :class:`Detection` records of the usable blobs (module docstring, step 1).
-
-    A blob is used only when its shape is that of a whole object, so that its size (hence its
-    distance) and its centroid (hence its bearing) are right:
-
-    - a cylinder (robot, obstacle, beacon) must not touch the left or right image edge, and
-      unless it touches the top or bottom edge its height must be ``height_m / (2 radius_m)``
-      times its width (within ``shape_tolerance`` or 1 px): a narrower blob is a robot partly
-      hidden behind a nearer object, whose width-based distance would be far too long;
-    - the ball (the largest pink blob only) must be as wide as high, within the same tolerance;
-      cut by the bottom of the image only, it keeps its width as diameter.
-    """
-    out: list[Detection] = []
-    focal_px = camera.focal_px
-    last_col, last_row = camera.width_px - 1, camera.height_px - 1
-    seen_ball = False
-    for blob in blobs:
-        half_w = (blob.width_px - 1) / 2.0
-        half_h = (blob.height_px - 1) / 2.0
-        cut_side = blob.u_px - half_w < 0.5 or blob.u_px + half_w > last_col - 0.5
-        cut_top = blob.v_px - half_h < 0.5
-        cut_bottom = blob.v_px + half_h > last_row - 0.5
-        size_px, distance_m = blob.size_px, blob.distance_m
-        if cut_side:
-            continue
-        if blob.colour == "pink":
-            if seen_ball:
-                continue
-            seen_ball = True
-            if cut_top:
-                continue
-            if cut_bottom:
-                if blob.height_px < 0.5 * blob.width_px:
-                    continue  # less than half the ball: its width is a chord, not the diameter
-                size_px = blob.width_px / 2.0
-                depth_m = focal_px * COLOUR_CLASSES["pink"].size_m / size_px
-                distance_m = depth_m / math.cos(blob.bearing_rad)
-            elif not _shape_agrees(blob.height_px, blob.width_px, shape_tolerance):
-                continue
-        elif blob.colour in _CYLINDER_ASPECT and not (cut_top or cut_bottom):
-            expected_h = _CYLINDER_ASPECT[blob.colour] * blob.width_px
-            if not _shape_agrees(blob.height_px, expected_h, shape_tolerance):
-                continue
-        bearing = float(wrap_rad(head_pan_rad + blob.bearing_rad))
-        out.append(
-            Detection(robot_id, time_s, blob.colour, bearing, head_pan_rad, size_px, distance_m)
-        )
-    return out
-
-
-# -- the shared-detections payload (Telepathy) --------------------------------------------------
-
-
-@dataclass(frozen=True)
-class SharedFrame:
-    """One robot's frame as shared with its team: time, head pan, odometry, detections."""
-
-    robot_id: int
-    time_s: float
-    head_pan_rad: float
-    odometry_pose: tuple[float, float, float] | None  # None: odometry not shared (the paper)
-    detections: tuple[Detection, ...]
-    #: Body bearings of every yellow blob the sender saw, whole or not (optional on the wire).
-    yellow_bearings: tuple[float, ...] = ()
-
-
-def encode_share(frame: SharedFrame) -> bytes:
-    """The msgpack payload of ``frame`` (a map ``v, id, t, pan, odom, det``; each detection is
-    ``[colour, bearing_rad, size_px, distance_m]``)."""
-    payload = msgpack.packb(
-        {
-            "v": SHARE_VERSION,
-            "id": int(frame.robot_id),
-            "t": float(frame.time_s),
-            "pan": float(frame.head_pan_rad),
-            "odom": (
-                None if frame.odometry_pose is None else [float(v) for v in frame.odometry_pose]
-            ),
-            "det": [
-                [d.colour, float(d.bearing_rad), float(d.size_px), float(d.distance_m)]
-                for d in frame.detections[:MAX_SHARED_DETECTIONS]
-            ],
-            "yb": [float(b) for b in frame.yellow_bearings[:MAX_SHARED_DETECTIONS]],
-        },
-        use_bin_type=True,
-    )
-    if len(payload) > MAX_SHARE_BYTES:  # pragma: no cover - 64 detections fit easily
-        raise ValueError(f"payload: {len(payload)} bytes exceeds {MAX_SHARE_BYTES}")
-    return payload
-
-
-def _number(
-    name: str, value, lo: float | None = None, hi: float | None = None, positive: bool = False
-) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ValueError(f"{name}: expected a number, got {type(value).__name__}")  # noqa: TRY004
-    number = float(value)
-    if not math.isfinite(number):
-        raise ValueError(f"{name}: must be finite, got {number!r}")
-    if positive and number <= 0.0:
-        raise ValueError(f"{name}: must be > 0, got {number!r}")
-    if lo is not None and number < lo:
-        raise ValueError(f"{name}: must be >= {lo}, got {number!r}")
-    if hi is not None and number > hi:
-        raise ValueError(f"{name}: must be <= {hi}, got {number!r}")
-    return number
-
-
-def decode_share(
-    payload,
-    camera: CameraParams,
-    sender_id: int | None = None,
-    now_s: float | None = None,
-    max_clock_skew_s: float = 0.05,
-) -> SharedFrame:
-    """Decode and validate a teammate's payload; ``ValueError`` naming the field if it is bad.
-
-    ``sender_id``: who the transport says sent it (the payload must claim the same id);
-    ``now_s``: the receiver's time (a frame more than ``max_clock_skew_s`` later is refused).
-    """
-    if not isinstance(payload, (bytes, bytearray, memoryview)):
-        raise ValueError(f"payload: expected bytes, got {type(payload).__name__}")  # noqa: TRY004
-    size = payload.nbytes if isinstance(payload, memoryview) else len(payload)
-    if size > MAX_SHARE_BYTES:
-        raise ValueError(f"payload: {size} bytes exceeds the limit of {MAX_SHARE_BYTES} bytes")
-    try:
-        wire = msgpack.unpackb(
-            payload,
-            raw=False,
-            use_list=True,
-            strict_map_key=True,
-            max_str_len=MAX_SHARE_BYTES,
-            max_bin_len=0,
-            max_ext_len=0,
-            max_array_len=MAX_SHARED_DETECTIONS + 8,
-            max_map_len=16,
-        )
-    except Exception as error:  # noqa: BLE001 -- msgpack raises many types, all mean "invalid"
-        raise ValueError(f"payload: not msgpack ({type(error).__name__})") from None
-    if not isinstance(wire, dict):
-        raise ValueError(f"payload: expected a msgpack map, got {type(wire).__name__}")  # noqa: TRY004
-    for key in _SHARE_KEYS:
-        if key not in wire:
-            raise ValueError(f"{key}: missing field")
-    extra = sorted(str(k) for k in wire if k not in (*_SHARE_KEYS, "yb"))
-    if extra:
-        raise ValueError(f"{extra[0]}: unknown field")
-    if wire["v"] != SHARE_VERSION or isinstance(wire["v"], bool):
-        raise ValueError(f"v: version {wire['v']!r}, expected {SHARE_VERSION}")
-    robot_id = wire["id"]
-    if (
-        isinstance(robot_id, bool)
-        or not isinstance(robot_id, int)
-        or not 0 <= robot_id <= MAX_ROBOT_ID
-    ):
-        raise ValueError(f"id: expected a robot id in 0..{MAX_ROBOT_ID}, got {robot_id!r}")
-    if sender_id is not None and robot_id != sender_id:
-        raise ValueError(f"id: payload from robot {sender_id} claims to be robot {robot_id}")
-    time_s = _number("t", wire["t"], lo=0.0)
-    if now_s is not None and time_s > now_s + max_clock_skew_s:
-        raise ValueError(f"t: {time_s:.3f} s is in the future (receiver's time {now_s:.3f} s)")
-    pan = _number(
-        "pan", wire["pan"], lo=-camera.pan_limit_rad - 1e-9, hi=camera.pan_limit_rad + 1e-9
-    )
-    odom = wire["odom"]
-    if odom is None:  # the sender does not share its odometry (seed 004 shares none)
-        odometry = None
-    else:
-        if not isinstance(odom, list) or len(odom) != 3:
-            raise ValueError("odom: expected [x_m, y_m, heading_rad] or nil")
-        odometry = (
-            _number("odom[0]", odom[0], -MAX_ODOMETRY_M, MAX_ODOMETRY_M),
-            _number("odom[1]", odom[1], -MAX_ODOMETRY_M, MAX_ODOMETRY_M),
-            _number("odom[2]", odom[2], -math.pi, math.pi),
-        )
-    det = wire["det"]
-    if not isinstance(det, list):
-        raise ValueError(f"det: expected a list, got {type(det).__name__}")  # noqa: TRY004
-    if len(det) > MAX_SHARED_DETECTIONS:
-        raise ValueError(f"det: {len(det)} detections, at most {MAX_SHARED_DETECTIONS}")
-    half_fov = camera.half_fov_rad + FOV_TOLERANCE_RAD
-    max_size_px = float(max(camera.width_px, camera.height_px))
-    detections = []
-    for i, item in enumerate(det):
-        where = f"det[{i}]"
-        if not isinstance(item, list) or len(item) != 4:
-            raise ValueError(f"{where}: expected [colour, bearing_rad, size_px, distance_m]")
-        colour, bearing, size_px, distance = item
-        if colour not in COLOUR_CLASSES:
-            raise ValueError(f"{where}.colour: unknown colour {colour!r}")
-        bearing = _number(f"{where}.bearing_rad", bearing, -math.pi, math.pi)
-        if abs(float(wrap_rad(bearing - pan))) > half_fov:
-            raise ValueError(
-                f"{where}.bearing_rad: {bearing:.3f} rad is outside the camera's field of view "
-                f"(head pan {pan:.3f} rad, half field of view {camera.half_fov_rad:.3f} rad)"
-            )
-        size_px = _number(f"{where}.size_px", size_px, positive=True, hi=max_size_px)
-        distance = _number(f"{where}.distance_m", distance, positive=True, hi=MAX_DISTANCE_M)
-        detections.append(Detection(robot_id, time_s, colour, bearing, pan, size_px, distance))
-    yb = wire.get("yb", [])
-    if not isinstance(yb, list) or len(yb) > MAX_SHARED_DETECTIONS:
-        raise ValueError(f"yb: expected a list of at most {MAX_SHARED_DETECTIONS} bearings")
-    yellow = []
-    for i, b in enumerate(yb):
-        b = _number(f"yb[{i}]", b, -math.pi, math.pi)
-        if abs(float(wrap_rad(b - pan))) > half_fov:
-            raise ValueError(f"yb[{i}]: {b:.3f} rad is outside the camera's field of view")
-        yellow.append(b)
-    return SharedFrame(robot_id, time_s, pan, odometry, tuple(detections), tuple(yellow))
 
 
 # -- what the brain reports ---------------------------------------------------------------------

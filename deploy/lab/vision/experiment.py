@@ -62,6 +62,7 @@ COLUMNS = [
     "all_reached_s",
     "teammate_err_median_m",
     "teammate_err_p90_m",
+    "pair01_err_median_m",
     "teammate_known_fraction",
     "ball_err_median_m",
     "ball_known_fraction",
@@ -112,10 +113,11 @@ def settings(spec: ExperimentSpec) -> list[Setting]:
                 raise ConfigError(f"experiment '{spec.name}', group '{g.name}', "
                                   f"setting '{sid}': {exc}") from None
             ticks = max(1, round(scenario.setup.duration_s / scenario.world.tick_s))
+            n = scenario.setup.robots
             out.append(Setting(
-                sid, g.name, scenario_name, tuple(overrides), grid, _config_hash(scenario), 2,
+                sid, g.name, scenario_name, tuple(overrides), grid, _config_hash(scenario), n,
                 scenario.setup.duration_s, "sharing" if scenario.agent.sharing else "no-sharing",
-                cost=2 * ticks))
+                cost=n * n * ticks))
     return out
 
 

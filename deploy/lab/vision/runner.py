@@ -478,6 +478,7 @@ def run_vision(
     ticks_known_ball = np.zeros(n, dtype=int)
     blind_first_ball_s: float | None = None
     resolved_ticks: list[bool | None] = []
+    pair01_err: list[float] = []
     bad_images = bad_payloads = 0
     commands = [STOP] * n
     all_reached_since: float | None = None
@@ -508,6 +509,8 @@ def run_vision(
             for j, xy in est.teammates.items():
                 truth = world.relative_position(i, world.pose[j, :2])
                 teammate_err[i].append(float(np.hypot(*(np.asarray(xy) - truth))))
+                if i + j == 1:  # robots 0 and 1, whatever the team's size
+                    pair01_err.append(teammate_err[i][-1])
             ticks_known_teammate[i] += bool(est.teammates)
             resolved_ticks += [brain.teammate_resolved(j) for j in est.teammates]
             if est.ball is not None:
@@ -589,6 +592,7 @@ def run_vision(
         "all_reached_s": max(reach_time) if all(t is not None for t in reach_time) else None,
         "teammate_err_median_m": _median(all_teammate),
         "teammate_err_p90_m": _p90(all_teammate),
+        "pair01_err_median_m": _median(pair01_err),
         "teammate_known_fraction": round(float(ticks_known_teammate.sum()) / (n * ticks), 4),
         "ball_err_median_m": _median(all_ball),
         "ball_known_fraction": round(float(ticks_known_ball.sum()) / (n * ticks), 4),
