@@ -284,8 +284,8 @@ RETIRED_VERBS = {
         "results/laser-collab.csv results/laser-robustness.csv --out docs/laser"),
     "vision-experiment": (
         "the vision experiments are the spec `vision` of `swarmloc experiment`: run\n"
-        "  swarmloc experiment vision            (groups: main, heading-jitter, "
-        "heading-jitter-objects; --replications N for fewer runs)\n"
+        "  swarmloc experiment vision            (groups: main, heading-error, "
+        "heading-error-prior, box-body, robot-count; --replications N for fewer runs)\n"
         "  swarmloc report results/vision.csv --out docs/vision"),
     "mrclam --all": (
         "every MRCLAM configuration is the spec `mrclam6` of `swarmloc experiment`: run\n"

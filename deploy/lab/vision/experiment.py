@@ -145,15 +145,16 @@ def row(spec: ExperimentSpec, job: Job, out: dict) -> list:
 _TEXT_COLUMNS = ("scenario", "variant", "goals", "true_goals", "group", "setting")
 
 
-def write_csv(rows: list[dict], path: str | Path) -> None:
-    """The report's ``results.csv``: :data:`COLUMNS` of each row."""
+def write_csv(rows: list[dict], path: str | Path, extra_columns=()) -> None:
+    """The report's ``results.csv``: :data:`COLUMNS` (then ``extra_columns``) of each row."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
+    columns = [*COLUMNS, *extra_columns]
     with path.open("w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=COLUMNS, lineterminator="\n")
+        writer = csv.DictWriter(handle, fieldnames=columns, lineterminator="\n")
         writer.writeheader()
         for row in rows:
-            writer.writerow({k: ("" if row.get(k) is None else row.get(k)) for k in COLUMNS})
+            writer.writerow({k: ("" if row.get(k) is None else row.get(k)) for k in columns})
 
 
 def read_csv(path: str | Path, text_columns=_TEXT_COLUMNS) -> list[dict]:
@@ -221,6 +222,9 @@ def summarize(rows: list[dict]) -> list[dict]:
                 "blind_ball_runs": sum(r["blind_ball_first_s"] is not None for r in group),
                 "blind_ball_first_s": median("blind_ball_first_s"),
                 "blind_relayed_ball_err_median_m": median("blind_relayed_ball_err_median_m"),
+                "ball_angle_end_deg": median("ball_angle_end_deg"),
+                "heading_resolved_fraction": median("heading_resolved_fraction"),
+                "pair01_err_median_m": median("pair01_err_median_m"),
                 "bad_images": sum(r["bad_images"] for r in group),
                 "bad_payloads": sum(r["bad_payloads"] for r in group),
                 "cpu_s_mean": float(np.mean([r["cpu_s"] for r in group])),

@@ -28,7 +28,16 @@ run goes on (the robot keeps its previous command for that tick). Measured per r
 world's ground truth: robot-robot collisions (events) and contact time, robot-obstacle
 collisions, whether every robot chose the goal the rule gives on the true start positions, the
 time until each robot reaches its (correct) goal (centre within ``body + goal radius +
-reach_margin_m``), and the error of each robot's estimate of its teammate and of the ball.
+reach_margin_m``), the error of each robot's estimate of its teammates (all pairs, and robots
+0-1 alone: ``pair01_err_median_m``) and of the ball, the fraction of robot-ticks whose teammate
+direction was resolved (perception mode), and the angle at the ball between robots 0 and 1 at
+the end (``ball_angle_end_deg``; §IV-A: "they catch the ball from opposite sides").
+
+Beyond §IV (issue #49): ``setup.robots`` puts 2-8 robots in the row (experiments 1 and 2; §II's
+"the larger the number of robots with common perception, the more precise localization", tested
+by the scenario ``vision-count``); ``setup.start_heading_error_rad`` turns robot 1's true start
+heading, i.e. the error of the parallel-start prior, an addition beyond the paper that only
+``agent.relative_heading = "odometry"`` or ``"objects"`` uses.
 
 ``swarmloc experiment vision`` (the vision family's hooks,
 :mod:`swarmloc.deploy.lab.vision.experiment`) repeats runs over seeds and both sharing modes;
