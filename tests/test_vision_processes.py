@@ -42,10 +42,20 @@ def _run_processes(tmp_path, scenario) -> dict:
     return json.loads((out / "results.json").read_text())
 
 
-@pytest.mark.parametrize(("name", "sharing"), [("vision-exp3", True), ("vision-exp1", False)])
-def test_vision_agents_over_zenoh_reproduce_the_in_process_run(tmp_path, name, sharing):
+PRIOR = ['agent.relative_heading="odometry"', "agent.initial_relative_heading_rad=0.0",
+         "agent.shared_odometry=true"]
+
+
+@pytest.mark.parametrize(
+    ("name", "sharing", "extra"),
+    [("vision-exp3", True, []),  # perception alone, the reproduction
+     ("vision-exp1", False, []),
+     ("vision-exp1", True, ['world.robot_body="box"']),  # the AIBO-like box body
+     ("vision-exp2", True, PRIOR)],  # the additions beyond the paper
+)
+def test_vision_agents_over_zenoh_reproduce_the_in_process_run(tmp_path, name, sharing, extra):
     seed = 4
-    scenario = load_any(name, {"seed": seed}, [f"agent.sharing={json.dumps(sharing)}"])
+    scenario = load_any(name, {"seed": seed}, [f"agent.sharing={json.dumps(sharing)}", *extra])
     result = _run_processes(tmp_path, scenario)
     assert result["reason"] == "completed" and result["rejected"] == {}
     metrics = result["metrics"]
@@ -53,9 +63,11 @@ def test_vision_agents_over_zenoh_reproduce_the_in_process_run(tmp_path, name, s
     for key in COMPARED:
         assert metrics[key] == local[key], key
     assert metrics["reach_s"] == [local["reach_s_0"], local["reach_s_1"]]
-    if sharing:  # experiment 3: the robot that cannot see the ball locates it from its teammate
+    if name == "vision-exp3":  # the robot that cannot see the ball locates it from its teammate
         assert metrics["collisions"] == 0 and metrics["goals_correct"]
         assert metrics["blind_relayed_ball_err_median_m"] is not None
+    elif sharing:
+        assert metrics["teammate_known_fraction"] > 0.5
     else:  # experiment 1 without sharing: they collide (seed 004 §IV-A)
         assert metrics["collisions"] > 0
 

@@ -32,7 +32,10 @@ teammate's of the same time, §III's 2 s window) multiplies it by likelihoods
   within range and unhidden, while I see no yellow blob there, is down-weighted by
   ``miss_likelihood``; the same for me in the teammate's view.
 
-Choices where the paper is silent (all parameters of ``VisionAgentConfig``): the grid has
+Choices where the paper is silent (all parameters of ``VisionAgentConfig``): detections are
+paired only within §III's window ("it checks for all previous distances ... associated to this
+color object in last 2 seconds"), but what the grid has learnt from them persists beyond it
+(the Markov filter of §II), blurred as the teammate may have moved; the grid has
 ``heading_bins`` bins; a sighting or object check is a Gaussian of spread ``match_sigma_m``
 (plus 5 % of the distance); a miss costs ``miss_likelihood``; the grid never lets a bin fall below
 ``1e-4`` of the uniform weight (recovery from a wrong elimination, e.g. by an occlusion the
