@@ -311,9 +311,11 @@ def write_report(
         (
             "Two simulated legged robots with one camera each (pinhole, f = 190 px, 208 x 160 px, noise "
             "and lighting variation, JPEG frames) detect colour blobs with OpenCV, share their "
-            'detections ("Telepathy"), locate each other by stereo (eq. 1) and the law of cosines '
-            "(eq. 2) from objects seen in common, and walk with a potential field (eq. 3-5) to the goals "
-            "of seed 004 §IV. Each run draws its own layout (mirror image and variant a/b of the "
+            'detections and neck angles ("Telepathy"), locate each other from the objects they see '
+            "in common, from perception alone (eq. 2's triangle, whose unknown angle at a single "
+            "common object is resolved by a second object, sightings and negative information; no "
+            "assumed start heading, no shared odometry), and walk with a potential field (eq. 3-5) "
+            "to the goals of seed 004 §IV. Each run draws its own layout (mirror image and variant a/b of the "
             "paper's figures at random), checked by rendering: each robot sees at the start what the "
             "paper says it sees."
         ),
