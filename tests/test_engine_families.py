@@ -208,7 +208,7 @@ def test_vision_spec_runs_resumes_and_equals_direct_runs(tmp_path, capsys):
     assert "| vision-exp1 | collisions without sharing |" in page
     assert "jittered start headings:" in page and "Group `jitter` of the spec" in page
     assert "swarmloc experiment vision-tiny" in page
-    assert len(read_rows(report / "results.csv")) == 4  # the main group's runs
+    assert len(read_rows(report / "results.csv")) == 5  # every group's runs
     for name in ("vision_trajectories.png", "vision_summary.png"):
         assert (report / name).stat().st_size > 0
 
