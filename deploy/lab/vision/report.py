@@ -151,9 +151,10 @@ def summary_table(summary: list[dict]) -> str:
         "| scenario | sharing | runs | runs with a robot-robot collision | collisions per run "
         "(mean) | contact s (median) | runs touching the obstacle | goals right | both reached "
         "| time to both reached s (median) | teammate error m (median / p90) | teammate known "
-        "| ball error m (median) | blind robot: ball known in runs, first at s, relayed error m |"
+        "| ball error m (median) | blind robot: ball known in runs, first at s, relayed error m "
+        "| teammate direction resolved (median fraction of robot-ticks) |"
     )
-    lines = [header, "|" + "---|" * 14]
+    lines = [header, "|" + "---|" * 15]
     for s in summary:
         blind = "-"
         if s["scenario"] == "vision-exp3":
@@ -168,7 +169,7 @@ def summary_table(summary: list[dict]) -> str:
             f"{s['goals_correct']} | {s['all_reached']} | {_fmt(s['all_reached_s_median'], '.1f')} | "
             f"{_fmt(s['teammate_err_median_m'], '.3f')} / {_fmt(s['teammate_err_p90_m'], '.3f')} | "
             f"{_fmt(s['teammate_known_fraction'], '.2f')} | {_fmt(s['ball_err_median_m'], '.3f')} | "
-            f"{blind} |"
+            f"{blind} | {_fmt(s.get('heading_resolved_fraction'), '.2f')} |"
         )
     return "\n".join(lines)
 
@@ -359,7 +360,10 @@ def write_report(
             "came within body + goal radius + 10 cm of its right goal within 40 s; errors are each "
             "run's median over the ticks where the robot had an estimate, then the median over runs "
             '(p90: the median over runs of each run\'s 90th percentile); "teammate known": fraction '
-            "of robot-ticks with a teammate estimate. Rejected images and payloads: "
+            "of robot-ticks with a teammate estimate; \"direction resolved\": the share of "
+            "robot-ticks whose teammate direction grid held at least 80 % of its mass within "
+            "0.3 rad of its peak (perception alone; `-` for the other modes). Rejected images and "
+            "payloads: "
             f"{sum(s['bad_images'] for s in summary)} and {sum(s['bad_payloads'] for s in summary)} "
             "(none are injected in these runs). Raw rows: `results.csv`."
         ),
