@@ -537,7 +537,7 @@ def test_without_sharing_a_robot_takes_the_nearest_goal_it_sees(ball, obstacle, 
         objects=(FieldObject("ball", *ball), FieldObject("obstacle", *obstacle)),
         seed=3,
     )
-    world, brains = _still_run(cfg, VisionAgentConfig(sharing=False), ticks=3)
+    _world, brains = _still_run(cfg, VisionAgentConfig(sharing=False), ticks=3)
     assert not brains[0].estimates().teammates
     assert brains[0].goal == goal
 

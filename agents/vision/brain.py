@@ -200,8 +200,9 @@ class VisionAgentConfig:
                 f"relative_heading: must be one of {list(RELATIVE_HEADING_MODES)}, "
                 f"got {self.relative_heading!r}"
             )
-        if not isinstance(self.shared_odometry, bool):
-            raise ValueError("shared_odometry: must be true or false")  # noqa: TRY004
+        for name in ("shared_odometry", "look_for_teammate"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"{name}: must be true or false")  # noqa: TRY004
         if self.relative_heading != "perception" and (
             self.initial_relative_heading_rad is None or not self.shared_odometry
         ):
@@ -862,8 +863,9 @@ class VisionBrain:
 
     def _look_for_teammate(self) -> float | None:
         """Perception mode, ``look_for_teammate``: while a teammate's direction is unresolved,
-        look for it (0.6 s in every 2 s, staggered by robot) at its most probable hypothesis that is out of view
-        now; the sighting, or its absence (negative information), narrows the grid."""
+        look for it (0.6 s in every 2 s, staggered by robot) at its most probable hypothesis
+        that is out of view now; the sighting, or its absence (negative information), narrows
+        the grid."""
         cfg, cam = self.config, self.camera
         if not (cfg.sharing and cfg.relative_heading == "perception" and cfg.look_for_teammate):
             return None
@@ -883,8 +885,8 @@ class VisionBrain:
             name = dict(_ANCHOR_COLOURS)[grid.anchor]
             if name not in self._own_sightings:
                 continue
-            theirs = _unique(self._theirs[tid][-1].detections, grid.anchor) if self._theirs[
-                tid] else None
+            latest = self._theirs[tid][-1] if self._theirs[tid] else None
+            theirs = None if latest is None else _unique(latest.detections, grid.anchor)
             if theirs is None:
                 continue
             positions = ring(self._own_sightings[name][1], theirs.distance_m, grid.gamma_rad)

@@ -86,7 +86,7 @@ class DirectionGrid:
         step = 2.0 * math.pi / self.bins
         if sigma_rad < 0.25 * step:
             return
-        half = min(self.bins // 2, int(math.ceil(3.0 * sigma_rad / step)))
+        half = min(self.bins // 2, math.ceil(3.0 * sigma_rad / step))
         offsets = np.arange(-half, half + 1)
         kernel = np.exp(-0.5 * (offsets * step / sigma_rad) ** 2)
         kernel /= kernel.sum()

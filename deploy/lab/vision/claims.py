@@ -18,6 +18,8 @@ value and by more than one run (counts) or 0.01 m (errors).
 
 from __future__ import annotations
 
+from itertools import pairwise
+
 import numpy as np
 
 OPPOSITE_DEG = 120.0
@@ -93,8 +95,8 @@ def compare_prior(name: str, prior: dict, alone: dict) -> tuple[str, bool]:
     or arrivals, or a larger teammate error at the 90th percentile or relayed-ball error)."""
     n = alone["runs"]
     parts = [
-        f"runs with a collision {prior['runs_with_collision']}/{prior['runs']} with the prior, "
-        f"{alone['runs_with_collision']}/{n} without",
+        (f"runs with a collision {prior['runs_with_collision']}/{prior['runs']} with the prior, "
+         f"{alone['runs_with_collision']}/{n} without"),
         f"goals right {prior['goals_correct']}/{prior['runs']} and {alone['goals_correct']}/{n}",
         f"both reached {prior['all_reached']}/{prior['runs']} and {alone['all_reached']}/{n}",
         _change("teammate error median", prior["teammate_err_median_m"],
@@ -139,8 +141,8 @@ def robot_count_sentence(rows: list[dict], key: str = "teammate_err_median_m") -
     medians = {n: float(np.median(_values([r for r in rows if r["robots"] == n], key)))
                for n in sizes}
     listed = ", ".join(f"{n} robots {medians[n]:.3f} m" for n in sizes)
-    falling = all(medians[b] < medians[a] for a, b in zip(sizes, sizes[1:]))
-    rising = all(medians[b] > medians[a] for a, b in zip(sizes, sizes[1:]))
+    falling = all(medians[b] < medians[a] for a, b in pairwise(sizes))
+    rising = all(medians[b] > medians[a] for a, b in pairwise(sizes))
     trend = ("falls with every robot added" if falling else "rises with every robot added"
              if rising else "does not fall steadily")
     return f"median teammate error {listed}: it {trend}", "agrees" if falling else "differs"

@@ -475,9 +475,9 @@ def _by_grid(rows: list[dict], key: str) -> dict:
 
 def _heading_error_table(sets: list[tuple[str, list[dict]]]) -> list[str]:
     lines = [
-        "| experiment | mode | start-heading error rad | runs | runs with a collision | goals "
-        "right | both reached | teammate error m (median / p90) | blind robot's relayed-ball "
-        "error m |",
+        ("| experiment | mode | start-heading error rad | runs | runs with a collision | goals "
+         "right | both reached | teammate error m (median / p90) | blind robot's relayed-ball "
+         "error m |"),
         "|" + "---|" * 9,
     ]
     sentences = []
@@ -586,8 +586,8 @@ def _group_sections(out: Path, summary: list[dict], groups) -> list[str]:
             ('Seed 004 §II: "The larger the number of robots with common perception, the more '
              'precise localization of agents is." ' + count[0] + ". " + count[1]),
             "",
-            "| robots | runs | teammate error m, median (quartiles) | robots 0-1 error m, median "
-            "| direction resolved (median fraction of robot-ticks) | collisions |",
+            ("| robots | runs | teammate error m, median (quartiles) | robots 0-1 error m, "
+             "median | direction resolved (median fraction of robot-ticks) | collisions |"),
             "|---|---|---|---|---|---|",
         ]
         for n in sizes:
@@ -606,12 +606,13 @@ def _group_sections(out: Path, summary: list[dict], groups) -> list[str]:
             )
         lines += [
             "",
-            f"Ours: {sentence}; robots 0 and 1 alone: {pair.replace('median teammate error ', '')}."
-            f" Verdict on §II's claim for this estimator: {verdict}. How it is made: each robot "
-            "estimates each teammate from what the two of them see in common; robots standing in "
-            "a row face the objects and do not see one another, and no joint estimate over all "
-            "robots' views is made (not implemented), so more robots bring more pairs, farther "
-            "apart, rather than better pairs.",
+            (f"Ours: {sentence}; robots 0 and 1 alone: "
+             f"{pair.replace('median teammate error ', '')}. Verdict on §II's claim for this "
+             f"estimator: {verdict}. How it is made: each robot estimates each teammate from what "
+             "the two of them see in common; robots standing in a row face the objects and do "
+             "not see one another, and no joint estimate over all robots' views is made (not "
+             "implemented), so more robots bring more pairs, farther apart, rather than better "
+             "pairs."),
             "",
             "![robot count](vision_robot_count.png)",
             "",
