@@ -52,8 +52,9 @@ def _scenario_args(p: argparse.ArgumentParser, positional: bool = True) -> None:
     g.add_argument("--variant", default=None, metavar="NAME",
                    help="a named set of overrides, applied before --set (e-puck): v0-defaults "
                         "(the defaults before issue 18's readings of the seeds), v1-defaults "
-                        "(issue 18's first readings), top-speed (cruise at the e-puck's 1,000 "
-                        "steps/s)")
+                        "(issue 18's first readings), v2-defaults (one message per encounter, "
+                        "before issue 42), top-speed (cruise at the e-puck's 1,000 steps/s), "
+                        "goals-25 (nest and prey at 25 / 75 %% of the long side)")
 
 
 def load_from_args(args, any_family: bool = False):

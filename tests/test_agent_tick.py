@@ -96,7 +96,8 @@ def test_covariance_strategies_and_motor_overrides_take_the_reference_path():
 
 def test_a_full_inbox_of_sixteen_messages_is_decoded():
     """The most a Sense carries (MAX_RECEIVED): every message reaches the brain's fusion."""
-    loaded = load_any("ES1", {"seed": 5}, ["world.robots=1"])
+    # one message per encounter: each of the 16 is fused the tick after its sender was heard
+    loaded = load_any("ES1", {"seed": 5}, ["world.robots=1", "agent.encounter_messages=1"])
     sc = loaded.scenario
     (packed,), (reference,) = _agents(sc, True), _agents(sc, False)
     # both goals known; the sender heard us (robot 0) at bearing 0.5 rad: eq. 27 has all it needs

@@ -161,7 +161,9 @@ def test_merged_uniform_draws_are_numpys_uniform():
 def _fusing_brain(strategy: str, beta: float, p_after_fusion: str) -> ForagingBrain:
     # give_up_factor 0: a robot built by hand with a goal 1 m away and 3 m travelled would give
     # up on it at once under the default rule (factor 2), and fuse nothing.
-    config = AgentConfig(strategy=strategy, beta=beta, p_after_fusion=p_after_fusion, give_up_factor=0.0)
+    # one message per encounter: each message fused at once, as the filter functions are
+    config = AgentConfig(strategy=strategy, beta=beta, p_after_fusion=p_after_fusion, give_up_factor=0.0,
+                         encounter_messages=1)
     return ForagingBrain(config, EpuckBody(), [0], [agent_rng(1, 0)], 0.1)
 
 

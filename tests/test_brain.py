@@ -552,6 +552,9 @@ def test_agent_rng_is_per_seed_and_per_robot():
 
 EXACT_WORLD = [
     "world.robots=2",
+    # one message per encounter: the exactness of eq. 14 and 27 through the world, message by
+    # message (tests/test_encounter.py holds the encounter of several messages to its mean)
+    "agent.encounter_messages=1",
     "world.medium.range_noise_m=0.0",
     "world.medium.bearing_noise_rad=0.0",
     "world.medium.loss_near=0.0",

@@ -16,7 +16,8 @@ K_M = 1.37e-4
 def _brain(strategy="SSIKF"):
     # give_up_factor 0: the robots these tests build by hand have goal estimates without the trip
     # that set them out, which the default give-up rule (factor 2) would abandon at once.
-    config = AgentConfig(strategy=strategy, odometry_k_m=K_M, give_up_factor=0.0)
+    # one message per encounter: eq. 20-22 on the one message a test sends
+    config = AgentConfig(strategy=strategy, odometry_k_m=K_M, give_up_factor=0.0, encounter_messages=1)
     return ForagingBrain(config, BODY, [0], [agent_rng(1, 0)], 0.1)
 
 

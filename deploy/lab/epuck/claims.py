@@ -240,6 +240,18 @@ def _same_value(a, b) -> bool:
     return norm(a) == norm(b)
 
 
+#: Settings of the communication process of an encounter (issue 42): they act only on robots
+#: that exchange messages, so an NC row is today's NC whatever they say.
+ENCOUNTER_COLUMNS = frozenset({"agent.encounter_messages", "agent.encounter_combine",
+                               "agent.encounter_stop", "agent.encounter_window_s"})
+
+
+def _communicates(strategy: str) -> bool:
+    from swarmloc.agents.epuck.social_odometry import STRATEGIES
+
+    return strategy in STRATEGIES and STRATEGIES.get(strategy).communicates
+
+
 class _Table:
     """The rows with what the figures and claims need: each row's variant, which rows belong to a
     sweep over the number of robots, and the best β of each Fermi variant."""
@@ -322,10 +334,13 @@ class _Table:
     def _variant(self, row: dict) -> Variant:
         strategy = row.get("strategy") or "?"
         extras = []
+        silent = not _communicates(strategy)
         for column, default in self._extra_columns.items():
             value = row.get(column)
             if value is None:
                 continue
+            if silent and column in ENCOUNTER_COLUMNS:
+                continue  # a robot that sends nothing has no encounter: the run is the same
             # A value is the default if the row's shipped scenario has it today (file or code
             # default); for a scenario the report cannot load, the most common value is.
             shipped = self._shipped(column, row.get("scenario"))
