@@ -20,7 +20,6 @@ placeholder) and the plugins this command loaded (``--plugin``), so that it runs
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import shlex
 from collections.abc import Sequence
@@ -53,13 +52,10 @@ def metric_columns(df, constant: bool = False) -> list[str]:
     return sorted(out, key=lambda c: (c in _COST, out.index(c)))
 
 
-def _fmt(x: float) -> str:
-    if math.isnan(x):
-        return "–"
-    return f"{x:.3g}" if abs(x) < 1e4 else f"{x:.0f}"
-
-
 def _summary(values) -> str:
+    """``median [Q1-Q3]`` of a column's values, formatted as every report formats figures."""
+    from swarmloc.deploy.lab.report import _fmt
+
     v = values.dropna()
     if v.empty:
         return "–"
@@ -123,6 +119,8 @@ def write(paths: list[Path], args: argparse.Namespace) -> Path:
     same = metric_columns(df, constant=True)
     if same:
         values = {m: pd.to_numeric(df[m], errors="coerce").dropna().iloc[0] for m in same}
+        from swarmloc.deploy.lab.report import _fmt
+
         lines += ["", "The same in every run: " + ", ".join(f"{m} {_fmt(float(v))}" for m, v in values.items()) + "."]
     plotted = [m for m in metrics if m not in _COST][:MAX_PLOTS]
     if plotted:
