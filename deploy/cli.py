@@ -42,7 +42,12 @@ def _scenario_args(p: argparse.ArgumentParser, positional: bool = True) -> None:
                             "default ES1 (for `swarmloc run`: ES1 shortened to 600 s)")
     g = p.add_argument_group("scenario overrides")
     g.add_argument("--robots", type=int, help="number of robots")
-    g.add_argument("--strategy", help="NC, SSGIKF, DSGIKF, SSGIFF, DSGIFF, SSIKF, DSIKF; GLOBAL or GLOBAL_RB (batch engine only)")
+    from swarmloc.agents.epuck.social_odometry import STRATEGIES  # noqa: PLC0415 -- after plugins load
+
+    batch_only = [n for n, s in STRATEGIES.items() if s.central]
+    others = [n for n in STRATEGIES if n not in batch_only]
+    g.add_argument("--strategy", help=f"e-puck scenarios: {', '.join(others)}; {' or '.join(batch_only)} "
+                                      "(batch engine only)")
     g.add_argument("--beta", type=float, help="Fermi beta of the SGIFFs")
     g.add_argument("--algorithm", help="laser scenarios: ssga, simple_ga, cfsga or amcl")
     g.add_argument("--seed", type=int, help="run seed")

@@ -33,7 +33,7 @@ PARTNER = 5
 
 def _brain(**settings) -> ForagingBrain:
     # give_up_factor 0: a goal set by hand 1 m away with 3 m travelled is not given up at once.
-    config = AgentConfig(strategy="SSGIKF", give_up_factor=0.0, encounter_window_s=2.0, **settings)
+    config = AgentConfig(**{"strategy": "SSGIKF", "give_up_factor": 0.0, "encounter_window_s": 2.0, **settings})
     brain = ForagingBrain(config, EpuckBody(), [0], [agent_rng(1, 0)], 0.1)
     brain.known[0] = True
     brain.target[0] = 0  # heading for the nest: a single strategy fuses the nest

@@ -82,7 +82,7 @@ def test_a_strategy_the_kernels_cannot_run_is_refused_when_registered():
     from swarmloc.agents.epuck.social_odometry import STRATEGIES, Strategy
 
     with pytest.raises(ValueError, match=r"gain: 'ci' is not one the compiled brain implements \(valid: 'none', "
-                                         r"'kalman', 'fermi'\)"):
+                                         r"'kalman', 'fermi' or a fusion rule registered before the strategy"):
         STRATEGIES.register(Strategy("MINE_CI", communicates=True, double=False, gain="ci"))
     with pytest.raises(ValueError, match="needs a gain"):
         STRATEGIES.register(Strategy("MINE_NONE", communicates=True, double=False, gain="none"))

@@ -26,6 +26,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from swarmloc import numerics
 from swarmloc.agents.epuck import kernels
 from swarmloc.agents.epuck.foraging import _COS_IR, _SIN_IR
 from swarmloc.agents.epuck.social_codec import decode_payload, encode_payload
@@ -147,7 +148,7 @@ def _views(f, i, b):
     partner_ids, o = _take2(i, o, n, e)
     partner_until, o = _take2(i, o, n, e)
     settings, o = _take(i, o, kernels.N_SETTINGS)
-    math_fns, o = _take(i, o, 3)
+    math_fns, o = _take(i, o, numerics.N_MATH_FNS)
     rng_fn, o = _take(i, o, n)
     rng_state, o = _take(i, o, n)
     need, o = _take(i, o, n)

@@ -36,6 +36,7 @@ import numpy as np
 
 from swarmloc import numerics
 from swarmloc.agents.epuck import kernels
+from swarmloc.agents.epuck.fusion import FUSION_RULES
 from swarmloc.agents.epuck.social_odometry import STRATEGIES
 from swarmloc.protocol.epuck import (  # noqa: F401 -- on_path is part of this module's API
     GROUND_SENSOR_OFFSETS_M,
@@ -540,6 +541,11 @@ class ForagingBrain:
             self._params[slot] = float(value)
         self._settings = np.zeros(kernels.N_SETTINGS, np.int64)
         gain = {"none": kernels.GAIN_NONE, "kalman": kernels.GAIN_KALMAN, "fermi": kernels.GAIN_FERMI}
+        self._math = numerics.numpy_math()  # numpy's exp and arctan2, bit for bit
+        if self.strategy.gain not in gain:  # a user's fusion rule (agents/epuck/fusion.py)
+            rule = FUSION_RULES[self.strategy.gain]
+            gain[rule.name] = kernels.GAIN_CUSTOM
+            self._math[numerics.M_GAIN], self._math[numerics.M_CONFIDENCE] = rule.addresses()
         for slot, value in (
             (kernels.S_DO_ODOMETRY, not uses_cov), (kernels.S_USE_COV, uses_cov),
             (kernels.S_COMMUNICATES, self.strategy.communicates), (kernels.S_DOUBLE, self.strategy.double),
@@ -553,7 +559,6 @@ class ForagingBrain:
             (kernels.S_STOP_MODE, ENCOUNTER_STOPS.index(config.encounter_stop)),
         ):
             self._settings[slot] = int(value)
-        self._math = numerics.numpy_math()  # numpy's exp and arctan2, bit for bit
 
     # -- layers ------------------------------------------------------------------------------
     # The work is done by the compiled kernels of agents/epuck/kernels.py, on the state arrays above,

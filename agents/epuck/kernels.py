@@ -37,7 +37,15 @@ import math
 import numpy as np
 from numba import njit
 
-from swarmloc.numerics import call_next_double, np_arctan2, np_exp
+from swarmloc.numerics import (
+    M_CONFIDENCE,
+    M_GAIN,
+    call_f64_3,
+    call_f64_4,
+    call_next_double,
+    np_arctan2,
+    np_exp,
+)
 from swarmloc.numerics import wrap as _wrap
 
 _PI = math.pi
@@ -45,8 +53,10 @@ _TWO_PI = 2.0 * math.pi
 
 #: Goal indices and "no target".
 NEST, PREY, NONE = 0, 1, -1
-#: Gains of :func:`brain_update`.
-GAIN_NONE, GAIN_KALMAN, GAIN_FERMI = 0, 1, 2
+#: Gains of :func:`brain_update`; GAIN_CUSTOM: a registered fusion rule of the user's
+#: (``agents/epuck/fusion.py``), called through the addresses in ``math_fns[M_GAIN]`` and
+#: ``math_fns[M_CONFIDENCE]``.
+GAIN_NONE, GAIN_KALMAN, GAIN_FERMI, GAIN_CUSTOM = 0, 1, 2, 3
 #: Who waits while an encounter collects messages (:func:`motor_commands`).
 STOP_NONE, STOP_WANDERING, STOP_ALL = 0, 1, 2
 
@@ -137,6 +147,9 @@ def _receive_goal(rec, goal, x_other, y_other, p_other, known, goal_xy, goal_p_m
         total = p_own + p_oth
         g = p_own / total if total > 0.0 else 0.5
         p_new = (1.0 - g) * p_own
+    elif gain == GAIN_CUSTOM:  # a user's rule (fusion.py): g, then p after the fusion
+        g = call_f64_3(math_fns[M_GAIN], p_own, p_oth, beta)
+        p_new = call_f64_4(math_fns[M_CONFIDENCE], p_own, p_oth, g, beta)
     else:  # eq. 24-26, the Fermi rule, with numpy's exp
         g = 1.0 / (1.0 + np_exp(_clip(-beta * (p_own - p_oth), -500.0, 500.0), math_fns))
         p_new = (1.0 - g) * p_own + g * p_oth

@@ -41,6 +41,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from swarmloc.agents.epuck.fusion import FUSION_RULES
 from swarmloc.registry import Registry
 
 
@@ -51,7 +52,7 @@ class Strategy:
     name: str
     communicates: bool
     double: bool
-    gain: str  # "none", "kalman" or "fermi"
+    gain: str  # "none", "kalman", "fermi" or a registered fusion rule's name (fusion.py)
     #: What ``p`` (inverse confidence) is: "distance" travelled since the area (eq. 23, the
     #: SGI filters), or "covariance": the spectral norm of the odometry covariance propagated
     #: with eq. 9-11 (eq. 19, the SIKF; seed 001's "covariance knowledge").
@@ -79,18 +80,21 @@ def check_strategy(name: str, strategy: Strategy) -> None:
             f"expected a Strategy, got {type(strategy).__name__}")
     if strategy.name != name:
         raise ValueError(f"registered as {name!r} but named {strategy.name!r}")
-    for field, value, valid in (("gain", strategy.gain, GAINS), ("confidence", strategy.confidence, CONFIDENCES),
+    gains = (*GAINS, *FUSION_RULES.names())
+    for field, value, valid in (("gain", strategy.gain, gains), ("confidence", strategy.confidence, CONFIDENCES),
                                 ("central", strategy.central, CENTRALS)):
         if value not in valid:
+            hint = (" or a fusion rule registered before the strategy (agents/epuck/fusion.py)"
+                    if field == "gain" else "")
             raise ValueError(f"{field}: {value!r} is not one the compiled brain implements "
-                             f"(valid: {', '.join(map(repr, valid))})")
+                             f"(valid: {', '.join(map(repr, valid))}{hint})")
     if strategy.communicates and strategy.gain == "none":
-        raise ValueError("gain: a strategy that communicates needs a gain ('kalman' or 'fermi')")
+        raise ValueError("gain: a strategy that communicates needs a gain ('kalman', 'fermi' or a fusion rule)")
 
 
 #: The registry of strategies, by the names the papers use. A strategy combines the built-in
-#: gains and confidences that the compiled brain implements (:func:`check_strategy` refuses
-#: others at registration; a new fusion rule of its own is a new brain: docs/extending.md).
+#: gains and confidences that the compiled brain implements, or a registered fusion rule of the
+#: user's as its gain (:func:`check_strategy` refuses others at registration; docs/extending.md).
 STRATEGIES: Registry[Strategy] = Registry("strategy", check_strategy)
 for _s in (
         Strategy("NC", communicates=False, double=False, gain="none"),
@@ -160,6 +164,14 @@ def fuse(strategy: Strategy, beta: float, p_after_fusion: str = "fused") -> Call
         return lambda x_own, p_own, x_other, p_other: sgiff_update(
             x_own, p_own, x_other, p_other, beta, p_after_fusion
         )
+    if strategy.gain in FUSION_RULES:
+        rule = FUSION_RULES[strategy.gain]
+
+        def update(x_own, p_own, x_other, p_other):
+            x_new, p_new = rule.update(x_own, p_own, x_other, p_other, beta)
+            return x_new, _p_after(p_new, p_own, p_after_fusion)
+
+        return update
     raise ValueError(f"strategy {strategy.name} does not fuse estimates")
 
 

@@ -32,8 +32,12 @@ from numba.extending import intrinsic
 #: How kernels get numpy's float64 ``exp`` and ``arctan2`` bit for bit (:func:`numpy_math`):
 #: numpy's own SIMD routines (SVML, on x86-64 with AVX-512), the C library's, or numpy itself.
 MATH_SVML, MATH_LIBM, MATH_NUMPY = 0, 1, 2
-#: Slots of the ``math_fns`` array of :func:`numpy_math`: the mode, then the SVML entry points.
-M_MODE, M_EXP, M_ATAN2 = 0, 1, 2
+#: Slots of the ``math_fns`` array of :func:`numpy_math`: the mode, then the SVML entry points,
+#: then the addresses of a strategy's own fusion rule (e-puck, ``agents/epuck/fusion.py``: its
+#: gain and its confidence after a fusion; 0 when the strategy uses a built-in rule). The array
+#: is what every compiled kernel already receives, so a pointer a kernel calls travels with it.
+M_MODE, M_EXP, M_ATAN2, M_GAIN, M_CONFIDENCE = 0, 1, 2, 3, 4
+N_MATH_FNS = 5
 
 
 def generator_address(rng: np.random.Generator) -> tuple[int, int]:
@@ -58,6 +62,34 @@ def call_next_double(typingctx, fn_address, state_address):
         byte_ptr = llvm_ir.IntType(8).as_pointer()
         fn = builder.inttoptr(args[0], llvm_ir.FunctionType(llvm_ir.DoubleType(), [byte_ptr]).as_pointer())
         return builder.call(fn, [builder.inttoptr(args[1], byte_ptr)])
+
+    return sig, codegen
+
+
+@intrinsic
+def call_f64_3(typingctx, fn_address, a, b, c):
+    """``f(a, b, c)`` of a C function ``double f(double, double, double)`` at ``fn_address``
+    (a numba ``cfunc``'s ``address``)."""
+    sig = types.float64(types.intp, types.float64, types.float64, types.float64)
+
+    def codegen(context, builder, signature, args):
+        d = llvm_ir.DoubleType()
+        fn = builder.inttoptr(args[0], llvm_ir.FunctionType(d, [d, d, d]).as_pointer())
+        return builder.call(fn, list(args[1:]))
+
+    return sig, codegen
+
+
+@intrinsic
+def call_f64_4(typingctx, fn_address, a, b, c, e):
+    """``f(a, b, c, e)`` of a C function ``double f(double, double, double, double)`` at
+    ``fn_address``."""
+    sig = types.float64(types.intp, types.float64, types.float64, types.float64, types.float64)
+
+    def codegen(context, builder, signature, args):
+        d = llvm_ir.DoubleType()
+        fn = builder.inttoptr(args[0], llvm_ir.FunctionType(d, [d, d, d, d]).as_pointer())
+        return builder.call(fn, list(args[1:]))
 
     return sig, codegen
 
@@ -224,8 +256,11 @@ def numpy_math() -> np.ndarray:
     """``math_fns`` for :func:`np_exp` and :func:`np_arctan2`: the first of numpy's SVML routines
     (what numpy 2 calls on x86-64 with AVX-512), then the C library's, whose results match numpy's
     on a probe of some 8,000 arguments here; else numpy itself, called from the kernel (about a
-    microsecond a call). Probed once per process."""
-    return np.array(_numpy_math(), np.int64)
+    microsecond a call). Probed once per process. ``N_MATH_FNS`` slots; those of a fusion rule
+    are 0 (none)."""
+    out = np.zeros(N_MATH_FNS, np.int64)
+    out[:3] = _numpy_math()
+    return out
 
 
 _PI = math.pi
