@@ -149,3 +149,53 @@ def test_a_model_that_imports_zenoh_is_caught(tmp_path):
                           capture_output=True, text=True, timeout=300, check=False, cwd=tmp_path)
     assert done.returncode == 1, done.stdout + done.stderr
     assert "pure: importing swarmloc_plugin_leaky imports zenoh" in done.stderr
+
+
+def _spec(tmp_path, flaw: str) -> Path:
+    path = tmp_path / "spec.toml"
+    path.write_text(f'''name = "broken-grid"
+family = "laser"
+replications = 2
+seed = 1
+
+[[group]]
+name = "broken"
+scenarios = ["laser-collab-three-rooms"]
+[group.set]
+"algorithm.name" = "broken"
+"algorithm.params" = {{flaw = "{flaw}"}}
+
+[[group]]
+name = "ssga"
+scenarios = ["laser-collab-three-rooms"]
+[group.set]
+"algorithm.name" = "ssga"
+''')
+    return path
+
+
+def test_an_experiment_refuses_a_grid_whose_plugin_code_is_not_reproducible(broken, tmp_path):
+    # Issue 48: `experiment` accepted a localizer drawing from np.random, and the same seed gave
+    # 0.072 and 0.239 m. A job of each setting is run twice first; nothing is written.
+    from swarmloc.config import ConfigError
+    from swarmloc.deploy.lab.experiment import load_spec, run_experiment
+
+    out = tmp_path / "rows.csv"
+    with pytest.raises(ConfigError, match=r"setting broken/laser-collab-three-rooms: not "
+                                          r"reproducible.*global random state \(np\.random"):
+        run_experiment(load_spec(str(_spec(tmp_path, "global random state"))), out, executor="inline")
+    assert not out.exists()
+
+
+def test_the_precheck_passes_reproducible_plugin_code_and_skips_when_there_is_none(broken, tmp_path):
+    from swarmloc.deploy.lab.experiment import load_spec, plan, precheck
+    from swarmloc.registry import foreign_entries
+
+    jobs = plan(load_spec(str(_spec(tmp_path, "none"))))
+    assert ("algorithm", "broken") in [(k, n) for k, n, _ in foreign_entries()]
+    assert precheck(jobs, ticks=3) == 2  # each setting once, the built-in's too
+    ALGORITHMS.unregister("broken")
+    try:
+        assert precheck(jobs, ticks=3) == 0  # only swarmloc's own code: the test suite checks it
+    finally:
+        ALGORITHMS.register(AlgorithmEntry("broken", "broken", _Broken))

@@ -140,6 +140,6 @@ def check_rule(name: str, rule: FusionRule) -> None:
 FUSION_RULES: Registry[FusionRule] = Registry("fusion rule", check_rule)
 
 
-def register(rule: FusionRule) -> FusionRule:
-    """Register ``rule`` (compiled and checked), then name it in a strategy's ``gain``."""
-    return FUSION_RULES.register(rule)
+#: Register a rule (compiled and checked), then name it in a strategy's ``gain``. The registry's
+#: own method, so that the origin it records is the caller's file and line.
+register = FUSION_RULES.register

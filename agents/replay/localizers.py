@@ -841,9 +841,9 @@ class Algorithm:
 ALGORITHMS: Registry[Algorithm] = Registry("algorithm")
 
 
-def register(algorithm: Algorithm) -> None:
-    """Add an algorithm to :data:`ALGORITHMS`; a second one with the same name is an error."""
-    ALGORITHMS.register(algorithm)
+#: Add an algorithm to :data:`ALGORITHMS`; a second one with the same name is an error. The
+#: registry's own method, so that the origin it records is the caller's file and line.
+register = ALGORITHMS.register
 
 
 def build_localizer(name: str, setup: LandmarkSetup, rng: np.random.Generator,

@@ -632,6 +632,43 @@ def execution_order(jobs: list[Job]) -> list[Job]:
     return sorted(jobs, key=lambda j: (j.replication, -j.cost, j.setting))
 
 
+#: Ticks of each run of the determinism pre-check (three runs a setting).
+PRECHECK_TICKS = 10
+
+
+def precheck(todo: list[Job], ticks: int = PRECHECK_TICKS) -> int:
+    """Hold the first job of every setting in ``todo`` to the contract checker's determinism
+    check (``swarmloc.checker.check_determinism``: two runs of its seed give the same bytes, for
+    ``ticks`` ticks), if any registry holds code from outside swarmloc (a plugin, a notebook);
+    swarmloc's own entries are checked by its test suite. Returns how many settings were checked.
+    ConfigError naming the setting and the cause if one is not deterministic: a grid of such
+    runs would give rows that no seed reproduces (issue 48: the same seed gave 0.072 and 0.239 m).
+    A scenario this host cannot load (a data set only the cluster's workers have) is skipped."""
+    from swarmloc.checker import CheckError, check_determinism
+    from swarmloc.deploy.scenario import load_any
+    from swarmloc.registry import foreign_entries
+
+    if not foreign_entries():
+        return 0
+    checked = 0
+    first: dict[str, Job] = {}
+    for job in todo:
+        first.setdefault(job.setting, job)
+    for setting, job in first.items():
+        try:
+            scenario = load_any(job.scenario, overrides=list(job.overrides))
+        except (ConfigError, OSError):
+            continue  # not loadable here; the workers load it
+        try:
+            check_determinism(scenario, ticks)
+        except CheckError as exc:
+            raise ConfigError(f"setting {setting}: not reproducible, so no grid was started "
+                              f"(seed {job.seed}, {ticks} ticks): {exc}; run `swarmloc check` on it, "
+                              f"or --no-check to run anyway") from None
+        checked += 1
+    return checked
+
+
 def run_experiment(
     spec: ExperimentSpec,
     results_path: str | Path,
@@ -643,9 +680,14 @@ def run_experiment(
     scheduler_timeout_s: float = DEFAULT_SCHEDULER_TIMEOUT_S,
     tls: DaskTls | None = None,
     worker_timeout_s: float = DEFAULT_WORKER_TIMEOUT_S,
+    check: bool = True,
 ) -> int:
     """Run every job of ``spec`` not yet in ``results_path`` and append one row per job; return
     the number of rows written.
+
+    ``check``: when code registered outside swarmloc is loaded (a plugin's localizer, strategy,
+    fusion rule or family), first hold one job of each setting to :func:`precheck`'s
+    determinism check, and refuse the grid (ConfigError, nothing written) if one fails.
 
     ``executor``: ``"local"`` runs ``workers`` spawned processes (default: ``os.cpu_count()``);
     ``"dask"`` runs the jobs on the workers of the Dask scheduler at ``scheduler``
@@ -667,6 +709,8 @@ def run_experiment(
     todo = execution_order([j for j in jobs if (j.setting, j.seed) not in done])
     if limit is not None:
         todo = todo[: max(0, limit)]
+    if check and todo:
+        precheck(todo)
     owned = isinstance(executor, str)
     if owned:
         if executor == "local" and workers is not None and workers < 1:
@@ -768,7 +812,7 @@ def main_experiment(args) -> int:
             written = run_experiment(spec, out, workers=args.workers, progress=not args.quiet,
                                      executor=args.executor, scheduler=args.scheduler,
                                      scheduler_timeout_s=args.scheduler_timeout_s, tls=tls,
-                                     worker_timeout_s=args.worker_timeout_s)
+                                     worker_timeout_s=args.worker_timeout_s, check=not args.no_check)
     except KeyboardInterrupt:
         print(f"\ninterrupted: finished replications are in {out}; "
               f"run the same command again to resume", file=sys.stderr)
@@ -811,6 +855,9 @@ def add_parser(subparsers) -> None:
     p.add_argument("--replications", type=int, default=None, help="replications per setting")
     p.add_argument("--dry-run", action="store_true", help="print the plan; run nothing")
     p.add_argument("--quiet", action="store_true", help="no progress output")
+    p.add_argument("--no-check", action="store_true",
+                   help="skip the determinism pre-check of code registered by plugins (one job of each "
+                        "setting run twice for a few ticks before the grid)")
     p.add_argument("--executor", choices=EXECUTORS, default="local",
                    help="where jobs run: local (a pool of --workers processes, the default) or "
                         "dask (the workers of --scheduler; pip install 'swarmloc[cluster]')")

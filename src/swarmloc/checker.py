@@ -226,14 +226,12 @@ def _check_batch(scenario, ticks: int) -> bool:
     return True
 
 
-def check(scenario, *, ticks: int = 30, batch: bool = True, pure: bool = True) -> CheckReport:
-    """Run every check on ``scenario`` (a :class:`swarmloc.deploy.scenario.AnyScenario`);
-    CheckError names the first that fails. ``ticks``: how long each run lasts."""
-    report = CheckReport(scenario.name, scenario.family, ticks)
-    first = _run(scenario, ticks)
-    if not first["senses"]:
-        raise _fail("types", "the world served no Sense")
-    report.passed.append("types")
+def check_determinism(scenario, ticks: int = 30, first: dict | None = None) -> None:
+    """Check 2 alone (CheckError if it fails): two runs of the seed give the same Sense and Act
+    bytes, another seed other Senses. ``first``: a run of ``scenario`` already made. The
+    experiment engine runs this on a job of each setting before a grid with a plugin's code."""
+    if first is None:
+        first = _run(scenario, ticks)
     again = _run(scenario, ticks)
     for name in ("senses", "acts"):
         for k, (a, b) in enumerate(zip(first[name], again[name], strict=True)):
@@ -246,6 +244,17 @@ def check(scenario, *, ticks: int = 30, batch: bool = True, pure: bool = True) -
     if FAMILIES.get(scenario.family).seeded_world and other["senses"] == first["senses"]:
         raise _fail("determinism", f"seeds {scenario.seed} and {scenario.seed + 1} gave the same "
                                    f"Senses: the seed does not reach the world")
+
+
+def check(scenario, *, ticks: int = 30, batch: bool = True, pure: bool = True) -> CheckReport:
+    """Run every check on ``scenario`` (a :class:`swarmloc.deploy.scenario.AnyScenario`);
+    CheckError names the first that fails. ``ticks``: how long each run lasts."""
+    report = CheckReport(scenario.name, scenario.family, ticks)
+    first = _run(scenario, ticks)
+    if not first["senses"]:
+        raise _fail("types", "the world served no Sense")
+    report.passed.append("types")
+    check_determinism(scenario, ticks, first)
     report.passed.append("determinism")
     if batch and _check_batch(scenario, ticks):
         report.passed.append("batch")

@@ -54,13 +54,29 @@ def resolve(target: Any) -> Any:
 _MISSING = object()
 
 
-def _caller() -> str:
-    """``file:line`` of the code that called into this module (a registration's origin)."""
+def _caller_frame():
     frame = sys._getframe(1)
     here = __file__
     while frame is not None and frame.f_code.co_filename == here:
         frame = frame.f_back
+    return frame
+
+
+def _caller() -> str:
+    """``file:line`` of the code that called into this module (a registration's origin)."""
+    frame = _caller_frame()
     return f"{frame.f_code.co_filename}:{frame.f_lineno}" if frame is not None else "?"
+
+
+#: Every registry made, so that :func:`foreign_entries` can look through them all.
+_REGISTRIES: list[Registry] = []
+
+
+def foreign_entries() -> list[tuple[str, str, str]]:
+    """``(kind, name, origin)`` of every entry registered from outside the swarmloc package (a
+    plugin, a notebook, a test): code the test suite has not checked, which the experiment engine
+    checks for determinism before it starts a grid."""
+    return [(r.kind, name, r.origin(name)) for r in _REGISTRIES for name in r.names() if not r.is_builtin(name)]
 
 
 def plugin_hint() -> str:
@@ -81,6 +97,8 @@ class Registry(Generic[T]):
         self._check = check
         self._entries: dict[str, T] = {}
         self._origins: dict[str, str] = {}
+        self._builtin: dict[str, bool] = {}
+        _REGISTRIES.append(self)
 
     def register(self, name_or_entry: Any, entry: Any = _MISSING) -> T:
         """Add an entry: ``register(entry)`` takes the name from ``entry.name``,
@@ -97,7 +115,9 @@ class Registry(Generic[T]):
             name = name_or_entry
         if not isinstance(name, str) or not name:
             raise ValueError(f"{self.kind} name: expected a non-empty string, got {name!r}")
-        origin = _caller()
+        frame = _caller_frame()
+        origin = f"{frame.f_code.co_filename}:{frame.f_lineno}" if frame is not None else "?"
+        module = frame.f_globals.get("__name__", "") if frame is not None else ""
         if name in self._entries:
             raise ValueError(f"{self.kind} {name!r} is already registered (at {self._origins[name]}); "
                              f"registered again at {origin}")
@@ -108,16 +128,22 @@ class Registry(Generic[T]):
                 raise ValueError(f"{self.kind} {name!r} (registered at {origin}): {exc}") from None
         self._entries[name] = entry
         self._origins[name] = origin
+        self._builtin[name] = module == "swarmloc" or module.startswith("swarmloc.")
         return entry
 
     def origin(self, name: str) -> str:
         """``file:line`` where ``name`` was registered."""
         return self._origins[name]
 
+    def is_builtin(self, name: str) -> bool:
+        """Whether ``name`` was registered by the swarmloc package itself (not a plugin)."""
+        return self._builtin[name]
+
     def unregister(self, name: str) -> None:
         """Remove ``name`` (tests that register a temporary entry)."""
         self._entries.pop(name, None)
         self._origins.pop(name, None)
+        self._builtin.pop(name, None)
 
     def get(self, name: str) -> T:
         """The entry of ``name``; ValueError naming the closest registered names if unknown."""

@@ -136,9 +136,6 @@ class AlgorithmRegistry(Registry[AlgorithmEntry]):
     def __init__(self) -> None:
         super().__init__("algorithm")
 
-    def register(self, entry: AlgorithmEntry) -> AlgorithmEntry:  # type: ignore[override]
-        return super().register(entry.name, entry)
-
 
 def default_algorithms() -> AlgorithmRegistry:
     """The four localizers of issue 4, and Player's AMCL of issue 43."""
