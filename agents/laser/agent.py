@@ -36,7 +36,7 @@ class LaserAgent:
     @classmethod
     def from_welcome(cls, welcome: Welcome, scenario) -> LaserAgent:
         from swarmloc.agents.epuck.foraging import agent_rng
-        from swarmloc.deploy.lab.laser.runner import ALGORITHMS
+        from swarmloc.agents.laser.registry import ALGORITHMS
 
         config, algo = scenario.world, scenario.algorithm
         if welcome.robot_id >= config.robots:

@@ -93,7 +93,7 @@ class LaserService(DrivenRobots):
         )
 
     def summary(self) -> dict:
-        from swarmloc.deploy.lab.laser.runner import pose_errors, summarize
+        from swarmloc.world.laser.scoring import pose_errors, summarize
 
         k = self.world.step_index
         if k == 0:

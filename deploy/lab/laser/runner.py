@@ -70,101 +70,18 @@ import numpy as np
 
 from swarmloc.agents.epuck.foraging import agent_rng
 from swarmloc.agents.laser.localizer import Localizer, LocalizerSetup
+from swarmloc.agents.laser.registry import (
+    ALGORITHMS,
+    AlgorithmEntry,
+    AlgorithmRegistry,
+    default_algorithms,
+)
 from swarmloc.config import ConfigError, apply_overrides, from_dict, load_toml, to_dict
-from swarmloc.registry import Registry, resolve
-from swarmloc.world.laser.laser import wrap_angle
 from swarmloc.world.laser.maps import MAPS, SegmentMap
+from swarmloc.world.laser.scoring import MetricsConfig, pose_errors, summarize
 from swarmloc.world.laser.world import WORLD_STREAM, LaserWorld, LaserWorldConfig
 
 # -- algorithms -------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class AlgorithmEntry:
-    """A localizer the runner can build by name.
-
-    ``localizer``: a class with ``from_config(setup, params, rng)`` (or a ``"module:Class"`` path
-    to one). ``params_type``: its parameter class with ``from_dict(mapping)`` (or a path; None:
-    the parameters are checked only when a localizer is built). ``population_keys``: the
-    parameters that :attr:`AlgorithmConfig.population` sets (all to the same value).
-    ``communicates``: whether the localizer broadcasts to teammates when cooperative (False: it
-    never sends, so no teammate payload ever reaches it, and the contract checker's "bad input"
-    check has nothing to corrupt).
-    """
-
-    name: str
-    label: str
-    localizer: Any
-    params_type: Any = None
-    population_keys: tuple[str, ...] = ()
-    communicates: bool = True
-
-    def params(self, population: int | None, params: dict | None) -> dict:
-        """The parameter dict a localizer is built with: the population, then ``params`` (which
-        win: ``params.min_particles`` beats ``population``)."""
-        out = {k: population for k in self.population_keys} if population is not None else {}
-        out.update(params or {})
-        return out
-
-    def check(self, params: dict) -> None:
-        """Refuse unknown or impossible parameters (ValueError naming them)."""
-        if self.params_type is None:
-            return
-        try:
-            resolve(self.params_type).from_dict(params)
-        except (TypeError, ValueError) as exc:
-            raise ValueError(f"{self.name}: {exc}") from None
-
-    def population_text(self, params: dict) -> str:
-        """The population as a results column: ``"300"``, or ``"1000-10000"`` for a range."""
-        if self.params_type is None or not self.population_keys:
-            values = [params[k] for k in self.population_keys if k in params]
-        else:
-            built = resolve(self.params_type).from_dict(params)
-            values = [getattr(built, k) for k in self.population_keys]
-        values = sorted(set(values))
-        return "-".join(str(v) for v in values)
-
-    def build(self, setup: LocalizerSetup, params: dict, rng: np.random.Generator) -> Localizer:
-        return resolve(self.localizer).from_config(setup, params, rng)
-
-
-class AlgorithmRegistry(Registry[AlgorithmEntry]):
-    """Localizers by name (:class:`swarmloc.registry.Registry`: a name registers once, an
-    unknown name suggests the closest)."""
-
-    def __init__(self) -> None:
-        super().__init__("algorithm")
-
-
-def default_algorithms() -> AlgorithmRegistry:
-    """The four localizers of issue 4, and Player's AMCL of issue 43."""
-    registry = AlgorithmRegistry()
-    registry.register(AlgorithmEntry(
-        "ssga", "MR-SSGA", "swarmloc.agents.laser.ssga:SSGALocalizer",
-        "swarmloc.agents.laser.ssga:SSGAParams", ("population_size",)))
-    registry.register(AlgorithmEntry(
-        "simple_ga", "simple GA", "swarmloc.agents.laser.simple_ga:SimpleGALocalizer",
-        "swarmloc.agents.laser.simple_ga:SimpleGAParams", ("population_size",)))
-    registry.register(AlgorithmEntry(
-        "cfsga", "CFS-GA", "swarmloc.agents.laser.cfsga:CFSGALocalizer",
-        "swarmloc.agents.laser.cfsga:CFSGAParams", ("population_size",)))
-    registry.register(AlgorithmEntry(
-        "amcl", "modern AMCL", "swarmloc.agents.laser.amcl:AMCLLocalizer",
-        "swarmloc.agents.laser.amcl:AMCLParams", ("min_particles", "max_particles")))
-    registry.register(AlgorithmEntry(
-        "amcl-player", "Player AMCL", "swarmloc.agents.laser.amcl_player:PlayerAMCLLocalizer",
-        "swarmloc.agents.laser.amcl_player:PlayerAMCLParams", ("min_particles", "max_particles"),
-        communicates=False))
-    return registry
-
-
-#: The localizers scenarios, ``--algorithm`` and specs choose from: the built-in four, and any a
-#: plugin registers (``ALGORITHMS.register(AlgorithmEntry(...))``, docs/extending.md).
-ALGORITHMS = default_algorithms()
-
-
-# -- the scenario -----------------------------------------------------------------------------
 
 
 @dataclass(frozen=True)
@@ -197,26 +114,6 @@ class AlgorithmConfig:
 
     def resolved_params(self) -> dict:
         return self.entry.params(self.population, self.params)
-
-
-@dataclass(frozen=True)
-class MetricsConfig:
-    """Thresholds of the run summary (see the module docstring)."""
-
-    #: 003 §V, fig. 4: "settle around a value of 15cm".
-    settle_error_m: float = 0.15
-    final_window_steps: int = 20
-    localized_error_m: float = 0.5
-
-    def __post_init__(self) -> None:
-        for name in ("settle_error_m", "localized_error_m"):
-            value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and not isinstance(value, bool) and value > 0):
-                raise ValueError(f"{name}: must be > 0, got {value!r}")
-        if isinstance(self.final_window_steps, bool) or not isinstance(self.final_window_steps, int) \
-                or self.final_window_steps < 1:
-            raise ValueError(f"final_window_steps: must be an integer >= 1, "
-                             f"got {self.final_window_steps!r}")
 
 
 @dataclass(frozen=True)
@@ -296,55 +193,6 @@ class LaserRunResult:
     summary: dict
 
 
-def _settle_step(error: np.ndarray, start: int, threshold: float, window: int) -> int | None:
-    """First step ``s >= start`` from which ``error`` stays below ``threshold`` to the end, if
-    that lasts at least ``window`` steps."""
-    span = error[start:]
-    bad = np.flatnonzero(~(span < threshold))
-    first_good = start + (int(bad[-1]) + 1 if bad.size else 0)
-    return first_good if error.shape[0] - first_good >= window else None
-
-
-def summarize(position_error_m: np.ndarray, heading_error_rad: np.ndarray,
-              kidnaps: list[tuple[int, int]], metrics: MetricsConfig,
-              sightings: np.ndarray | None = None) -> dict:
-    """The summary figures of one run (see the module docstring). ``kidnaps``: (robot, step)."""
-    steps, robots = position_error_m.shape
-    window = min(metrics.final_window_steps, steps)
-    final = position_error_m[-window:].mean(axis=0)
-    last_kidnap = {}
-    for robot, step in kidnaps:
-        last_kidnap[robot] = max(step, last_kidnap.get(robot, 0))
-    settle = [_settle_step(position_error_m[:, r], last_kidnap.get(r, 0), metrics.settle_error_m,
-                           window) for r in range(robots)]
-    out = {
-        "final_error_m": float(final.mean()),
-        "final_error_max_m": float(final.max()),
-        "final_heading_error_rad": float(heading_error_rad[-window:].mean()),
-        "mean_error_m": float(position_error_m.mean()),
-        "settle_step": None if any(s is None for s in settle) else int(max(settle)),
-        "settled_robots": int(sum(s is not None for s in settle)),
-        "localized": bool(np.all(final < metrics.localized_error_m)),
-        "kidnap_step": None, "settled_before_kidnap": None, "recovered": None,
-        "recover_steps": None, "first_contact_step": None,
-    }
-    if kidnaps:
-        robot, step = min(kidnaps, key=lambda rk: rk[1])
-        before = position_error_m[:step, robot]
-        pre = _settle_step(before, 0, metrics.settle_error_m, min(window, before.shape[0]))
-        out["kidnap_step"] = int(step)
-        out["settled_before_kidnap"] = pre is not None
-        kidnapped = sorted(last_kidnap)
-        out["recovered"] = bool(np.all(final[kidnapped] < metrics.localized_error_m))
-        after = [settle[r] for r in kidnapped]
-        out["recover_steps"] = (None if any(s is None for s in after)
-                                else int(max(s - last_kidnap[r] for s, r in zip(after, kidnapped))))
-    if sightings is not None:
-        contact = np.flatnonzero(np.asarray(sightings) > 0)
-        out["first_contact_step"] = int(contact[0]) if contact.size else None
-    return out
-
-
 def _canonical_segments(segments_m: np.ndarray) -> set:
     ends = np.round(segments_m.reshape(-1, 2, 2), 6) + 0.0  # + 0.0 turns -0.0 into 0.0
     flip = (ends[:, 0, 0] > ends[:, 1, 0]) | ((ends[:, 0, 0] == ends[:, 1, 0])
@@ -400,13 +248,6 @@ def _check_estimate(value, robot: int) -> np.ndarray:
         raise ValueError(f"robot {robot}: estimate() must return 3 finite numbers "
                          f"(x_m, y_m, theta_rad), got {value!r}")
     return estimate
-
-
-def pose_errors(estimates: np.ndarray, true_poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Position error ``|xy_est - xy_true|`` and heading error ``|wrap(theta_est - theta_true)|``,
-    each ``(T, N)``, of estimates ``(T, N, 3)`` against true poses ``(T, N, 3)``."""
-    position = np.hypot(estimates[..., 0] - true_poses[..., 0], estimates[..., 1] - true_poses[..., 1])
-    return position, np.abs(wrap_angle(estimates[..., 2] - true_poses[..., 2]))
 
 
 def run_laser(
@@ -522,10 +363,26 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
+# ALGORITHMS, AlgorithmEntry, AlgorithmRegistry (agents/laser/registry.py) and MetricsConfig,
+# pose_errors, summarize (world/laser/scoring.py) live beside the code that uses them, below
+# deploy/ (issue 48: nothing in agents/ or world/ imports deploy/); re-exported here.
 __all__ = [
-    "ALGORITHMS", "AlgorithmConfig", "AlgorithmEntry", "AlgorithmRegistry", "LaserRunResult",
-    "LaserScenario", "MetricsConfig", "decode_series_mm", "encode_series_mm",
-    "laser_scenario_names", "load_laser_scenario", "map_rotations", "run_laser", "summarize",
+    "ALGORITHMS",
+    "AlgorithmConfig",
+    "AlgorithmEntry",
+    "AlgorithmRegistry",
+    "LaserRunResult",
+    "LaserScenario",
+    "MetricsConfig",
+    "decode_series_mm",
+    "default_algorithms",
+    "encode_series_mm",
+    "laser_scenario_names",
+    "load_laser_scenario",
+    "map_rotations",
+    "pose_errors",
+    "run_laser",
+    "summarize",
     "symmetric_position_error",
 ]
 
