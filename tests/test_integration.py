@@ -227,6 +227,30 @@ def test_realtime_mode_holds_ten_hertz(tmp_path):
         assert min(o["sense_put"], o["collect"], o["step"]) >= 0, o
 
 
+def test_a_paused_realtime_world_resumes_from_now_without_a_burst(tmp_path):
+    # Issue 47: after SIGCONT the real-time world ran the missed ticks back to back. The clock's
+    # rule (world/server.py: _pace): a stall longer than a period restarts it from now, so the
+    # run lasts its simulated time plus the pause, and the stall is counted.
+    _, path = _scenario(tmp_path, ["world.robots=3", "world.duration_s=6.0"])
+    pause_s = 1.5
+    with supervised() as sup:
+        swarm = Swarm(sup, tmp_path, path, robots=3, realtime=True)
+        with WorldWatch(swarm.endpoint, swarm.keys) as watch:
+            assert watch.wait_for(lambda s: s.tick >= 20, 60), "the run never reached tick 20"
+            os.kill(swarm.world.pid, signal.SIGSTOP)
+            try:
+                time.sleep(pause_s)  # the fault itself is a duration: the world is stopped this long
+            finally:
+                os.kill(swarm.world.pid, signal.SIGCONT)
+            result = swarm.results()
+    t = result["transport"]
+    assert result["reason"] == "completed" and t["ticks"] == 60
+    assert t["stalls"] == 1, t
+    assert pause_s - 0.3 <= t["stalled_s"] <= pause_s + 0.5, t
+    # no catch-up: 6 s of ticks at 10 Hz plus the pause (a burst would end near 6 s)
+    assert t["wall_s"] >= 6.0 + pause_s - 0.3, t
+
+
 def test_swarmloc_run_command_end_to_end(tmp_path):
     out = tmp_path / "runs"
     proc = subprocess.Popen(

@@ -58,6 +58,10 @@ class TickStats:
     stale_acts: int = 0  # acts that arrived after their tick was closed
     overruns: int = 0
     overruns_after_1s: int = 0  # those of ticks after the run's first wall second (start-up)
+    #: real-time stalls: the clock found more than one period late (the process was stopped,
+    #: the machine swapped, no agent was alive) and restarted from now instead of catching up
+    stalls: int = 0
+    stalled_s: float = 0.0  # the real time those stalls skipped
     #: the first overruns, where the time went: tick, the tick's phases (ms) and how late the
     #: next tick started (ms), for diagnosis (results.json: transport.overrun_ticks)
     overrun_ticks: list = field(default_factory=list)
@@ -85,6 +89,8 @@ class TickStats:
             "stale_acts": self.stale_acts,
             "overruns": self.overruns,
             "overruns_after_1s": self.overruns_after_1s,
+            "stalls": self.stalls,
+            "stalled_s": round(self.stalled_s, 3),
             "overrun_ticks": self.overrun_ticks,
             **{f"{phase}_ms_p{q}": round(float(np.percentile(v, q)) * 1e3, 3) if v else None
                for phase, v in self.phases_s.items() for q in (50, 99)},
@@ -294,11 +300,10 @@ class WorldServer:
         next_tick_at = time.monotonic()
         next_checkpoint_at = time.monotonic() + self.checkpoint_every_s
         while not world.done and not self._stop.is_set():
-            before = time.monotonic()
             if not self._await_any_agent():
                 return self.finish("agents gone")
-            if time.monotonic() - before > period:
-                next_tick_at = time.monotonic()  # real time resumes from now, no catch-up burst
+            if self.realtime:
+                next_tick_at = self._pace(next_tick_at, period)
             t0 = time.perf_counter()
             with self._cond:
                 # A robot whose agent died stands still; one whose agent came back moves again.
@@ -358,6 +363,22 @@ class WorldServer:
                     if time.perf_counter() - self.stats.started_s > 1.0:
                         self.stats.overruns_after_1s += 1
         return self.finish("completed" if world.done else "stopped")
+
+    def _pace(self, next_tick_at: float, period: float) -> float:
+        """The real-time clock's one rule after any pause (docs/deploy.md, "Real time"): a tick
+        that starts late by at most one period starts at once (an overrun, made up by the next
+        ticks' slack); found later than that, whatever the cause (the world SIGSTOPped, a swap,
+        a wait for agents, a long collection), the clock restarts from now: the missed slots
+        are dropped and counted (``stalls``, ``stalled_s``), never run back to back."""
+        now = time.monotonic()
+        late = now - next_tick_at
+        if late > period:
+            self.stats.stalls += 1
+            self.stats.stalled_s += late
+            log.warning("real-time clock: %.2f s late (the world was paused?); resuming from now, "
+                        "no catch-up", late)
+            return now
+        return next_tick_at
 
     def _publish_state(self) -> None:
         self._state_pub.put(encode(self.world.state()))
