@@ -42,6 +42,9 @@ log = logging.getLogger("swarmloc.agent")
 
 
 WORLD_GONE = "the world-server is gone"
+#: How long the world's liveliness may be gone before an agent warns: longer than its RunEnd
+#: takes to follow at a normal end.
+WORLD_GONE_WARN_S = 1.0
 #: Exit code of an agent whose world died (and did not come back within the grace period).
 EXIT_WORLD_GONE = 3
 #: How often the main thread looks at the run's end and the world's health while the callbacks
@@ -86,6 +89,7 @@ class AgentNode:
         self.end_reason = ""
         self.last_sense_at = time.monotonic()
         self.world_lost_at: float | None = None
+        self._world_warned = False  # warned that the world is gone (once per absence)
         self.ticks = 0
         self._decls = []
         #: ``act_wire(data, errors) -> bytes | None`` of brains that answer an encoded Sense with
@@ -125,10 +129,15 @@ class AgentNode:
 
     def _on_world_alive(self, sample: zenoh.Sample) -> None:
         if sample.kind == zenoh.SampleKind.PUT:
+            if self.world_lost_at is not None and self._world_warned:
+                log.warning("robot %d: the world-server is back", self.robot_id)
             self.world_lost_at = None
+            self._world_warned = False
         else:
+            # Not a warning yet: at a normal end the world's token goes at the same moment as
+            # its RunEnd, on another key, and may arrive first (issue 47: 98 of 100 agents
+            # warned at every normal end). wait() warns if the run has not ended by then.
             self.world_lost_at = time.monotonic()
-            log.warning("robot %d: the world-server is gone; waiting for it", self.robot_id)
 
     def declare(self) -> None:
         s, k = self.session, self.keys
@@ -164,6 +173,10 @@ class AgentNode:
             lost = self.world_lost_at
             if lost is not None and now - lost > world_grace_s:
                 return WORLD_GONE
+            if lost is not None and not self._world_warned and now - lost > WORLD_GONE_WARN_S:
+                self._world_warned = True
+                log.warning("robot %d: the world-server is gone; waiting for it (up to %.0f s)",
+                            self.robot_id, world_grace_s)
             if now - self.last_sense_at > world_timeout_s:
                 return f"no sense from the world for {world_timeout_s:.0f} s"
         return self.end_reason

@@ -138,6 +138,8 @@ def test_process_run_matches_batch_engine(tmp_path, readings):
             states = list(watch.states)
         agent_codes = [a.wait(timeout=30) for a in swarm.agents]
     assert agent_codes == [0, 0, 0, 0], "agents end cleanly when the run ends"
+    for i in range(4):  # issue 47: a normal end is not a lost world (the token may beat RunEnd)
+        assert "world-server is gone" not in (tmp_path / f"agent-{i}.log").read_text()
     batch = run_batch(scenario)
     assert result["reason"] == "completed"
     assert result["transport"]["ticks"] == 400
@@ -386,6 +388,8 @@ def test_agents_exit_cleanly_when_the_world_dies_and_its_results_so_far_are_inta
             codes = [a.wait(timeout=40) for a in swarm.agents]
             waited_s = time.monotonic() - killed_at
     assert codes == [3, 3, 3], "agents report that their world is gone"
+    for i in range(3):  # and said so, once, while they waited
+        assert (tmp_path / f"agent-{i}.log").read_text().count("the world-server is gone; waiting for it") == 1
     assert 9.0 <= waited_s <= 30.0, f"agents waited {waited_s:.1f} s (grace 10 s)"
     recorded = json.loads(results.read_text())  # written atomically: never half a file
     assert recorded["reason"] == "running" and recorded["tick"] > 0
