@@ -367,6 +367,9 @@ def test_restarted_agent_rejoins_its_robot(tmp_path):
                 "the restarted agent did not get its robot back")
             result = swarm.results(timeout_s=300)
     assert result["reason"] == "completed" and result["dead_robots"] == []
+    # the world logged and timed the rejoin (issue 47: rejoins were not logged)
+    assert result["transport"]["rejoins"] == 1 and result["transport"]["rejoin_away_s_max"] > 0
+    assert "robot 1: agent back after" in (tmp_path / "world.log").read_text()
     revived = [s for s in states if s.alive[1] and s.tick > min(t.tick for t in states if not t.alive[1])]
     first, last = revived[0].poses[1], revived[-1].poses[1]
     assert abs(last[0] - first[0]) + abs(last[1] - first[1]) > 0.02, "the revived robot moves again"

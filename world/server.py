@@ -62,6 +62,8 @@ class TickStats:
     #: the machine swapped, no agent was alive) and restarted from now instead of catching up
     stalls: int = 0
     stalled_s: float = 0.0  # the real time those stalls skipped
+    rejoins: int = 0  # agents that came back after their liveliness token went
+    rejoin_away_s: list = field(default_factory=list)  # how long each was gone
     #: the first overruns, where the time went: tick, the tick's phases (ms) and how late the
     #: next tick started (ms), for diagnosis (results.json: transport.overrun_ticks)
     overrun_ticks: list = field(default_factory=list)
@@ -91,6 +93,8 @@ class TickStats:
             "overruns_after_1s": self.overruns_after_1s,
             "stalls": self.stalls,
             "stalled_s": round(self.stalled_s, 3),
+            "rejoins": self.rejoins,
+            "rejoin_away_s_max": round(max(self.rejoin_away_s), 3) if self.rejoin_away_s else None,
             "overrun_ticks": self.overrun_ticks,
             **{f"{phase}_ms_p{q}": round(float(np.percentile(v, q)) * 1e3, 3) if v else None
                for phase, v in self.phases_s.items() for q in (50, 99)},
@@ -140,6 +144,7 @@ class WorldServer:
         self._cond = threading.Condition()
         self._live = np.zeros(n, bool)  # liveliness tokens present
         self._joined = np.zeros(n, bool)
+        self._gone_at: dict[int, float] = {}  # robots whose agent went, since when (monotonic)
         self._current_tick = -1
         self._awaited = 0
         self._got = np.zeros(n, bool)
@@ -180,8 +185,17 @@ class WorldServer:
         with self._cond:
             if sample.kind == zenoh.SampleKind.PUT:
                 self._live[robot] = True
+                gone_at = self._gone_at.pop(robot, None)
+                if gone_at is not None:  # a rejoin: logged and timed (docs/deploy.md, Faults)
+                    away_s = time.monotonic() - gone_at
+                    self.stats.rejoins += 1
+                    self.stats.rejoin_away_s.append(away_s)
+                    log.warning("robot %d: agent back after %.2f s, the robot moves again", robot, away_s)
+                else:
+                    log.debug("robot %d: agent alive", robot)
             else:
                 self._live[robot] = False
+                self._gone_at[robot] = time.monotonic()
                 log.warning("robot %d: agent gone, the robot stands still", robot)
             self._cond.notify_all()
 
