@@ -105,9 +105,10 @@ def start_router(sup: Supervisor, listen: str = "tcp/127.0.0.1:0", timeout_s: fl
 
 def start_announcing(
     sup: Supervisor, args: list[str], *, log_path: Path | None = None, timeout_s: float = 60.0
-) -> tuple[subprocess.Popen, str]:
+) -> tuple[subprocess.Popen, str | None]:
     """Start a piece that prints one JSON line with its bound endpoints once it listens (the
-    readiness signal); return the process and its TCP endpoint. Its log goes to ``log_path``."""
+    readiness signal); return the process and its TCP endpoint (None for a client, which
+    listens on none). Its log goes to ``log_path``."""
     proc = sup.start(args, stdout=subprocess.PIPE, log_path=log_path)
     box: dict = {}
 
@@ -123,4 +124,4 @@ def start_announcing(
         raise RuntimeError(f"`swarmloc {args[0]}` did not announce its endpoint within {timeout_s:.0f} s")
     endpoints = json.loads(line)["endpoints"]
     tcp = [e for e in endpoints if e.startswith("tcp/")]
-    return proc, (tcp or endpoints)[0]
+    return proc, (tcp or endpoints or [None])[0]

@@ -219,6 +219,9 @@ def config_from_args(args: argparse.Namespace) -> zenoh.Config:
         connect=args.connect or (),
         listen=args.listen or (),
         config_file=args.config,
+        # --announce prints the bound endpoints, read from the admin space: on for it in every
+        # mode (a client listens on none, and announces an empty list; issue 47: it crashed).
+        admin_space=True if getattr(args, "announce", False) else None,
     )
 
 

@@ -435,8 +435,10 @@ def test_router_restart_mid_run_and_the_run_completes(tmp_path):
         router, endpoint = start_announcing(sup, ["router", "-l", "tcp/127.0.0.1:0", "--announce"],
                                             log_path=tmp_path / "router.log")
         transport = ["-m", "client", "-e", endpoint, "--run", run]
-        world = sup.start(["world", str(path), *transport, "--out", str(tmp_path / "out"),
-                           "--act-timeout-s", "30"], log_path=tmp_path / "world.log")
+        # --announce in client mode: an empty endpoint list once declared (issue 47: it crashed)
+        world, listens = start_announcing(sup, ["world", str(path), *transport, "--out", str(tmp_path / "out"),
+                                                "--act-timeout-s", "30", "--announce"], log_path=tmp_path / "world.log")
+        assert listens is None
         for i in range(3):
             sup.start(["agent", "--robot", str(i), *transport], log_path=tmp_path / f"agent-{i}.log")
         with WorldWatch(endpoint, keys) as watch:
