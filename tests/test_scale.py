@@ -348,6 +348,34 @@ def test_forked_agents_are_processes_with_their_own_sessions(tmp_path):
 
 
 @pytest.mark.integration
+def test_an_agent_killed_under_respawn_is_forked_again_and_its_robot_moves(tmp_path):
+    # Issue 47: a restarted `swarmloc agent` took 4.6-7 s to be live (imports, kernels); the
+    # warm server forks it again at once. The run completes with the robot back, and the world
+    # counts the rejoin.
+    path = _es1_file(tmp_path, robots=3, duration_s=30.0)
+    run = "resp" + uuid.uuid4().hex[:8]
+    with supervised() as sup:
+        swarm = start_swarm(sup, path, run=run, robots=3, out=tmp_path / "out", log_dir=tmp_path / "logs",
+                            realtime=True, join_timeout_s=60, agent_args=("--respawn",))
+        states = _States(swarm.router_endpoint, run)
+        try:
+            assert states.wait_for(lambda s: s.tick > 0), "the run never started"
+            killed_at = states.states[-1].tick
+            os.kill(swarm.agents[1].pid, signal.SIGKILL)
+            assert swarm.agents[1].wait(timeout=10) == -signal.SIGKILL
+            assert swarm.world.wait(timeout=120) == 0
+        finally:
+            states.close()
+    result = json.loads((tmp_path / "out" / "results.json").read_text())
+    assert result["reason"] == "completed" and result["dead_robots"] == []
+    # back so fast that the world states (one a second) may never show it dead: the world's count
+    assert result["transport"]["rejoins"] == 1 and result["transport"]["rejoin_away_s_max"] < 20
+    after = [s for s in states.states if s.tick > killed_at + 100 and s.alive[1]]
+    assert len(after) >= 2 and after[-1].poses[1] != after[0].poses[1], "the respawned agent drives its robot"
+    assert "robot 1's agent was killed (signal 9); forked again" in (tmp_path / "logs" / "agent-server.log").read_text()
+
+
+@pytest.mark.integration
 def test_killed_agent_server_takes_its_agents_along(tmp_path):
     path = _es1_file(tmp_path, robots=3, duration_s=120.0)
     with supervised() as sup:

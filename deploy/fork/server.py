@@ -181,9 +181,8 @@ def serve(args) -> int:
     server_args = argparse.Namespace(**{k: v for k, v in vars(args).items() if k != "func"})
     forking.set()
     server_pid = os.getpid()
-    for robot in robots:
-        if stopping.is_set():
-            break
+
+    def fork_agent(robot: int) -> int:
         sys.stdout.flush()
         sys.stderr.flush()
         pid = os.fork()
@@ -202,13 +201,28 @@ def serve(args) -> int:
                 sys.stderr.flush()
                 os._exit(code if isinstance(code, int) else 1)
         children[pid] = robot
-        say({"robot": robot, "pid": pid})
-    return _reap(children, stopping, say)
+        return pid
+
+    for robot in robots:
+        if stopping.is_set():
+            break
+        say({"robot": robot, "pid": fork_agent(robot)})
+    return _reap(children, stopping, say, fork_agent if args.respawn else None)
 
 
-def _reap(children: dict[int, int], stopping: threading.Event, say) -> int:
-    """Wait for every child; after a stop, SIGKILL those left after ``STOP_GRACE_S``."""
+#: Respawns of one robot's agent at most (``--respawn``): an agent killed again and again by
+#: something on the host is not hidden for ever.
+MAX_RESPAWNS = 20
+
+
+def _reap(children: dict[int, int], stopping: threading.Event, say, respawn=None) -> int:
+    """Wait for every child; after a stop, SIGKILL those left after ``STOP_GRACE_S``.
+    ``respawn(robot) -> pid``, if given: an agent killed by a signal while the server is not
+    stopping is forked again at once from this warm server (``--respawn``; about a fork and a
+    Zenoh session, against the seconds of imports and kernel loading of ``swarmloc agent``),
+    at most ``MAX_RESPAWNS`` times a robot."""
     failed = 0
+    respawned: dict[int, int] = {}
     kill_at = None
     while children:
         pid, status = os.waitpid(-1, os.WNOHANG)
@@ -227,8 +241,15 @@ def _reap(children: dict[int, int], stopping: threading.Event, say) -> int:
         if robot is None:
             continue
         code = os.waitstatus_to_exitcode(status)
-        failed += code != 0
         say({"robot": robot, "exit": code})
+        if (respawn is not None and code < 0 and not stopping.is_set()
+                and respawned.get(robot, 0) < MAX_RESPAWNS):
+            respawned[robot] = respawned.get(robot, 0) + 1
+            print(f"swarmloc agents: robot {robot}'s agent was killed (signal {-code}); forked again "
+                  f"({respawned[robot]} of at most {MAX_RESPAWNS})", file=sys.stderr, flush=True)
+            say({"robot": robot, "pid": respawn(robot), "respawn": respawned[robot]})
+            continue
+        failed += code != 0
     return 0 if failed == 0 else 1
 
 
@@ -317,4 +338,7 @@ def add_parser(sub, agent_args) -> None:
                    help="stop every agent when the process that started this one dies; give its "
                         "PID if known (a launcher's own pid), so that a launcher that died before "
                         "this process asked is noticed too")
+    p.add_argument("--respawn", action="store_true",
+                   help="fork an agent killed by a signal again at once (live again in about a "
+                        f"second; at most {MAX_RESPAWNS} times a robot)")
     p.set_defaults(func=serve)
