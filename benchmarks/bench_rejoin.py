@@ -63,7 +63,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{'how the agent comes back':32s} {'rejoins':>8s} {'longest away (s)':>17s} {'dead at end':>12s}")
     for mode, label in (("restart", "swarmloc agent, started again"), ("respawn", "swarmloc agents --respawn")):
         r = _run(mode, args.robots, args.kills)
-        print(f"{label:32s} {r['rejoins']:>8d} {r['away_max_s']!s:>17s} {str(r['dead']):>12s}", flush=True)
+        print(f"{label:32s} {r['rejoins']:>8d} {r['away_max_s']!s:>17s} {r['dead']!s:>12s}", flush=True)
         if r["code"] != 0:
             print(f"  the world exited {r['code']}", file=sys.stderr)
     return 0
