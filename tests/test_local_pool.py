@@ -126,3 +126,55 @@ def _parent(pid: int) -> int:
         return int((Path("/proc") / str(pid) / "stat").read_text().rsplit(")", 1)[1].split()[1])
     except (OSError, IndexError, ValueError):
         return -1
+
+
+def test_an_experiment_killed_at_random_moments_resumes_to_an_uninterrupted_runs_rows(tmp_path):
+    # Issue 47: SIGKILL `swarmloc experiment` at seeded random moments (after 1-3 new rows, or
+    # while the pool is still starting), once leaving half a row as a kill inside a write would,
+    # then resume each time with the same command. The final file holds every planned row once,
+    # equal to an uninterrupted run's (timing columns aside), and no process of a killed run lives.
+    import random
+    import time
+
+    spec = spec_file(tmp_path, 5, 120.0)  # 10 jobs
+    reference = tmp_path / "reference.csv"
+    run_experiment(load_spec(spec), reference, executor="inline", progress=False)
+    out = tmp_path / "rows.csv"
+    rng = random.Random(47)
+    command = [sys.executable, "-m", "swarmloc", "experiment", str(spec), "--workers", "2", "--out", str(out)]
+    killed_helpers: list[int] = []
+    stderr: list[str] = []
+    for attempt in range(3):
+        proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                start_new_session=True)
+        try:
+            before = out.read_bytes().count(b"\n") - 1 if out.exists() else 0
+            if attempt > 0:  # the first kill lands while the pool starts: no row yet
+                wait_for_rows(out, before + rng.randint(1, 2), proc)
+            else:
+                deadline = time.monotonic() + 60  # until the pool's workers exist, then at once
+                while not _children(proc.pid) and time.monotonic() < deadline:
+                    time.sleep(0.01)  # polling /proc for the workers; not a readiness guess
+            killed_helpers += [int(e.name) for e in Path("/proc").iterdir()
+                               if e.name.isdigit() and _parent(int(e.name)) == proc.pid]
+            proc.kill()
+            stderr.append(proc.communicate(timeout=30)[1])
+        finally:
+            if proc.poll() is None:
+                os.killpg(proc.pid, signal.SIGKILL)
+                proc.communicate(timeout=10)
+        if attempt == 1 and out.exists():  # what a kill inside the one write of a row leaves
+            rows = out.read_bytes().split(b"\n")
+            with open(out, "ab") as handle:
+                handle.write(rows[1][: len(rows[1]) // 2])
+    done = subprocess.run(command, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    # the half row was cut off by the next start (the third attempt), not read as a row
+    assert "cutting off an unfinished last row" in stderr[2], stderr[2][-2000:]
+    rows = read_rows(out)
+    assert keys(rows) == planned(spec), "every planned row once, none twice, none torn"
+    assert model_columns(rows) == model_columns(read_rows(reference))
+    end = time.monotonic() + 30
+    while time.monotonic() < end and any(_alive(p) for p in killed_helpers):
+        time.sleep(0.05)  # the kernel's parent-death signal landing; not a readiness guess
+    assert not [p for p in killed_helpers if _alive(p)], "a process of a killed run still lives"
