@@ -200,13 +200,32 @@ def main_view(args) -> int:
 # -- swarmloc export ---------------------------------------------------------------------------
 
 def main_export(args) -> int:
-    try:
-        import rosbags  # noqa: F401 -- only to say what is missing
-    except ImportError:
-        return _fail("export --to rosbag2 needs the rosbags package: pip install 'swarmloc[ros]'")
-    from swarmloc.deploy.observe.rosbag import export_rosbag2
+    source = Path(args.file)
+    if source.is_dir():  # robots' data: an MRCLAM folder or a rosbag2 folder, either way
+        from swarmloc.world.replay.mrclam import MrclamFormatError, load_dataset, write_dataset
 
-    counts = export_rosbag2(args.file, args.out)
+        try:
+            dataset = load_dataset(source)
+            if args.to == "mrclam":
+                write_dataset(dataset, args.out)
+                print(f"wrote {args.out}: MRCLAM folder, robots {', '.join(map(str, dataset.robot_ids))}")
+                return 0
+            from swarmloc.world.replay.rosbag import write_rosbag2
+
+            counts = write_rosbag2(dataset, args.out)
+        except MrclamFormatError as exc:
+            return _fail(str(exc))
+    else:
+        if args.to != "rosbag2":
+            return _fail(f"--to {args.to}: a recording ({source}) exports to rosbag2 only; "
+                         "--to mrclam takes a data set folder or a bag")
+        try:
+            import rosbags  # noqa: F401 -- only to say what is missing
+        except ImportError:
+            return _fail("export --to rosbag2 needs the rosbags package: pip install 'swarmloc[ros]'")
+        from swarmloc.deploy.observe.rosbag import export_rosbag2
+
+        counts = export_rosbag2(args.file, args.out)
     print(f"wrote {args.out}: " + ", ".join(f"{t} {n}" for t, n in counts.items()))
     return 0
 
@@ -373,14 +392,16 @@ def add_parsers(sub) -> None:
     add_transport_args(p)
     p.set_defaults(func=main_record)
 
-    p = sub.add_parser("export", help="write a recording in another format (a ROS 2 bag)",
+    p = sub.add_parser("export", help="write a recording or robots' data in another format (ROS 2 bag, MRCLAM)",
                        description="Write FILE.mcap (a swarmloc recording) as a rosbag2 folder OUT "
                                    "(MCAP storage, CDR, standard ROS 2 message types: /tf, "
                                    "/robot_<i>/odom, /swarmloc/estimates, /swarmloc/arena; "
-                                   "docs/recording.md). Needs the rosbags package "
-                                   "(pip install 'swarmloc[ros]'), no ROS installation.")
-    p.add_argument("file", metavar="FILE.mcap")
-    p.add_argument("--to", required=True, choices=["rosbag2"], help="the format")
+                                   "docs/recording.md); or a real-data set (an MRCLAM folder, or a "
+                                   "bag) as a rosbag2 folder or an MRCLAM folder (docs/mrclam/bags.md). "
+                                   "Bags need the rosbags package (pip install 'swarmloc[ros]'), no "
+                                   "ROS installation.")
+    p.add_argument("file", metavar="FILE.mcap|DATASET")
+    p.add_argument("--to", required=True, choices=["rosbag2", "mrclam"], help="the format")
     p.add_argument("out", metavar="OUT", help="the folder to write (must not exist)")
     p.set_defaults(func=main_export)
 

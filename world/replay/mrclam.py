@@ -260,13 +260,18 @@ def _robot_files(folder: Path) -> dict[int, set[str]]:
 
 
 def load_dataset(folder: str | Path, name: str | None = None) -> MrclamDataset:
-    """Read one MRCLAM data set folder (see the module docstring for the format and quirks).
+    """Read one MRCLAM data set folder (see the module docstring for the format and quirks), or
+    a rosbag2 folder in the layout of :mod:`swarmloc.world.replay.rosbag`.
 
     Raises :class:`MrclamFormatError` naming the missing file or the first bad line.
     """
     folder = Path(folder)
     if not folder.exists():
         raise MrclamFormatError(f"no such folder: {folder}")
+    if (folder / "metadata.yaml").is_file():  # a ROS 2 bag of one's own robots (issue 44)
+        from swarmloc.world.replay.rosbag import read_rosbag2
+
+        return read_rosbag2(folder, name)
     if not folder.is_dir():
         raise MrclamFormatError(f"not a folder: {folder} (give the data set folder of .dat files)")
     for required in ("Barcodes.dat", "Landmark_Groundtruth.dat"):
