@@ -42,7 +42,7 @@ def _scenario_args(p: argparse.ArgumentParser, positional: bool = True) -> None:
                             "default ES1 (for `swarmloc run`: ES1 shortened to 600 s)")
     g = p.add_argument_group("scenario overrides")
     g.add_argument("--robots", type=int, help="number of robots")
-    from swarmloc.agents.epuck.social_odometry import STRATEGIES  # noqa: PLC0415 -- after plugins load
+    from swarmloc.agents.epuck.social_odometry import STRATEGIES
 
     batch_only = [n for n, s in STRATEGIES.items() if s.central]
     others = [n for n in STRATEGIES if n not in batch_only]

@@ -15,7 +15,14 @@ from importlib import resources
 from pathlib import Path
 
 from swarmloc.agents.epuck.foraging import AgentConfig
-from swarmloc.config import ConfigError, apply_overrides, from_dict, load_toml, to_dict
+from swarmloc.config import (
+    ConfigError,
+    apply_overrides,
+    did_you_mean,
+    from_dict,
+    load_toml,
+    to_dict,
+)
 from swarmloc.world.epuck.foraging import WorldConfig
 
 DEFAULT_SCENARIO = "ES1"
@@ -134,10 +141,7 @@ def scenario_data(name_or_path: str) -> dict:
     shipped = _shipped()
     names = sorted(shipped)
     if name_or_path not in names:
-        import difflib
-
-        close = difflib.get_close_matches(name_or_path, names, n=1, cutoff=0.4)
-        hint = f"; did you mean '{close[0]}'?" if close else ""
+        hint = did_you_mean(str(name_or_path), names, 0.4)
         raise ConfigError(
             f"scenario '{name_or_path}': no such file or shipped scenario{hint} "
             f"(shipped: {', '.join(names)})"

@@ -80,7 +80,6 @@ summaries teammates broadcast, their codec and the teammate factor are
 
 from __future__ import annotations
 
-import difflib
 import functools
 import math
 from collections.abc import Callable, Mapping
@@ -115,6 +114,7 @@ from swarmloc.agents.laser.localizer import (
     RadioMessage,
     Sighting,
 )
+from swarmloc.config import did_you_mean
 from swarmloc.world.laser.laser import unicycle_model, wrap_angle
 from swarmloc.world.laser.maps import SegmentMap, build_map, distance_to_walls, free_space_sample
 
@@ -287,8 +287,7 @@ class AMCLParams:
         known = [f.name for f in fields(cls)]
         for key in data:
             if key not in known:
-                close = difflib.get_close_matches(str(key), known, n=1, cutoff=0.5)
-                hint = f"; did you mean {close[0]!r}?" if close else ""
+                hint = did_you_mean(str(key), known, 0.5)
                 raise ValueError(f"unknown AMCL parameter {key!r}{hint}")
         return cls(**dict(data))
 

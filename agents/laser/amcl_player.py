@@ -65,7 +65,6 @@ All randomness comes from the generator given to the constructor, in a fixed ord
 
 from __future__ import annotations
 
-import difflib
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
@@ -80,6 +79,7 @@ from swarmloc.agents.laser.amcl_sampling import (
     histogram_bin_keys,
 )
 from swarmloc.agents.laser.localizer import LaserObservation, LocalizerSetup
+from swarmloc.config import did_you_mean
 from swarmloc.world.laser.laser import cast_rays, unicycle_model, wrap_angle
 from swarmloc.world.laser.maps import SegmentMap, build_map, free_space_sample
 
@@ -164,8 +164,7 @@ class PlayerAMCLParams:
         known = [f.name for f in fields(cls)]
         for key in data:
             if key not in known:
-                close = difflib.get_close_matches(str(key), known, n=1, cutoff=0.5)
-                hint = f"; did you mean {close[0]!r}?" if close else ""
+                hint = did_you_mean(str(key), known, 0.5)
                 raise ValueError(f"unknown amcl-player parameter {key!r}{hint}")
         return cls(**dict(data))
 

@@ -111,7 +111,6 @@ perturbations; random individuals (``sample_poses``).
 
 from __future__ import annotations
 
-import difflib
 import math
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, fields
@@ -128,6 +127,7 @@ from swarmloc.agents.laser.localizer import (
     evenly_spaced,
 )
 from swarmloc.agents.laser.refine import check_refine_options, compass_search
+from swarmloc.config import did_you_mean
 from swarmloc.world.laser.laser import cast_rays, unicycle_model, wrap_angle
 from swarmloc.world.laser.maps import SegmentMap, build_map, free_space_sample
 
@@ -288,8 +288,7 @@ class CFSGAParams:
         known = [f.name for f in fields(cls)]
         for key in config:
             if key not in known:
-                close = difflib.get_close_matches(str(key), known, n=1, cutoff=0.5)
-                hint = f"; did you mean {close[0]!r}?" if close else ""
+                hint = did_you_mean(str(key), known, 0.5)
                 raise ValueError(f"{key}: unknown CFS-GA parameter{hint}")
         return cls(**dict(config))
 

@@ -32,7 +32,6 @@ Draws per step (fixed order): selection (``rng.random(M)`` for the roulette,
 
 from __future__ import annotations
 
-import difflib
 from dataclasses import dataclass
 
 import numpy as np
@@ -46,6 +45,7 @@ from swarmloc.agents.laser.ssga import (
     mutate,
     mutation_std,
 )
+from swarmloc.config import did_you_mean
 
 SELECTIONS = ("roulette", "tournament")
 
@@ -64,8 +64,7 @@ class SimpleGAParams(GeneticParams):
     def __post_init__(self) -> None:
         super().__post_init__()
         if self.selection not in SELECTIONS:
-            close = difflib.get_close_matches(str(self.selection), SELECTIONS, n=1)
-            hint = f"; did you mean {close[0]!r}?" if close else ""
+            hint = did_you_mean(str(self.selection), SELECTIONS, 0.6)
             raise ValueError(
                 f"selection: unknown selection {self.selection!r}{hint} (known: {SELECTIONS})"
             )

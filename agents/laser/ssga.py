@@ -92,7 +92,6 @@ the kinematic noise ``(N, 2)``, then the reproduction's draws.
 
 from __future__ import annotations
 
-import difflib
 import math
 from dataclasses import dataclass, fields
 from typing import Any, ClassVar
@@ -109,6 +108,7 @@ from swarmloc.agents.laser.localizer import (
     evenly_spaced,
 )
 from swarmloc.agents.laser.refine import check_refine_options, compass_search
+from swarmloc.config import did_you_mean
 from swarmloc.world.laser.laser import cast_rays, unicycle_model, wrap_angle
 from swarmloc.world.laser.maps import SegmentMap, build_map, free_space_sample
 
@@ -205,8 +205,7 @@ class GeneticParams:
         known = [f.name for f in fields(cls)]
         for key in config:
             if key not in known:
-                close = difflib.get_close_matches(str(key), known, n=1)
-                hint = f"; did you mean {close[0]!r}?" if close else ""
+                hint = did_you_mean(str(key), known, 0.6)
                 raise ValueError(f"{key}: unknown parameter of {cls.__name__}{hint}")
         return cls(**config)
 
@@ -227,8 +226,7 @@ class SSGAParams(GeneticParams):
     def __post_init__(self) -> None:
         super().__post_init__()
         if self.network not in NETWORKS:
-            close = difflib.get_close_matches(str(self.network), NETWORKS, n=1)
-            hint = f"; did you mean {close[0]!r}?" if close else ""
+            hint = did_you_mean(str(self.network), NETWORKS, 0.6)
             raise ValueError(f"network: unknown network {self.network!r}{hint} (known: {NETWORKS})")
         k = _positive_int(self.ws_neighbours, "ws_neighbours", minimum=2)
         if k % 2 or k >= self.population_size:

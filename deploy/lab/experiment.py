@@ -44,7 +44,6 @@ from __future__ import annotations
 
 import csv
 import dataclasses
-import difflib
 import io
 import itertools
 import json
@@ -57,7 +56,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any, Protocol
 
-from swarmloc.config import ConfigError, from_dict, load_toml
+from swarmloc.config import ConfigError, did_you_mean, from_dict, load_toml
 from swarmloc.deploy.lab.executors import (
     DEFAULT_SCHEDULER_TIMEOUT_S,
     DEFAULT_WORKER_TIMEOUT_S,
@@ -375,8 +374,7 @@ def load_spec(name_or_path: str | Path) -> ExperimentSpec:
     if path.suffix != ".toml" and not path.exists():
         names = shipped_specs()
         if str(name_or_path) not in names:
-            close = difflib.get_close_matches(str(name_or_path), names, n=1, cutoff=0.4)
-            hint = f"; did you mean '{close[0]}'?" if close else ""
+            hint = did_you_mean(str(name_or_path), names, 0.4)
             raise ConfigError(f"experiment '{name_or_path}': no such file or shipped spec{hint} "
                               f"(shipped: {', '.join(names)})")
         path = Path(str(_experiments_folder() / f"{name_or_path}.toml"))

@@ -21,7 +21,6 @@ run`` and every piece it starts, ``swarmloc experiment`` and its workers):
 
 from __future__ import annotations
 
-import difflib
 import importlib
 import importlib.util
 import os
@@ -30,6 +29,8 @@ from collections.abc import Callable, Iterator
 from importlib.metadata import entry_points
 from pathlib import Path
 from typing import Any, Generic, TypeVar
+
+from swarmloc.config import did_you_mean
 
 T = TypeVar("T")
 
@@ -150,8 +151,7 @@ class Registry(Generic[T]):
         try:
             return self._entries[name]
         except (KeyError, TypeError):
-            close = difflib.get_close_matches(str(name), list(self._entries), n=1, cutoff=0.4)
-            hint = f"; did you mean '{close[0]}'?" if close else ""
+            hint = did_you_mean(str(name), list(self._entries), 0.4)
             raise ValueError(f"unknown {self.kind} {name!r}{hint} "
                              f"(known: {', '.join(self._entries)}); {plugin_hint()}") from None
 

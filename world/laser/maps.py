@@ -33,12 +33,13 @@ Coordinates: metres; poses are ``(x_m, y_m, theta_rad)``.
 
 from __future__ import annotations
 
-import difflib
 import math
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from swarmloc.config import did_you_mean
 
 #: Segments shorter than this are degenerate and rejected (metres).
 MIN_SEGMENT_LENGTH_M = 1e-6
@@ -397,8 +398,7 @@ class MapRegistry:
         try:
             builder = self._builders[name]
         except KeyError:
-            close = difflib.get_close_matches(str(name), self._builders, n=1)
-            hint = f"; did you mean {close[0]!r}?" if close else ""
+            hint = did_you_mean(str(name), self._builders, 0.6)
             raise KeyError(
                 f"unknown map {name!r}{hint} (known: {', '.join(self._builders)})"
             ) from None

@@ -54,7 +54,6 @@ collaborative and an autonomous run of one seed see the same paths and sensor no
 
 from __future__ import annotations
 
-import difflib
 import functools
 import math
 from dataclasses import dataclass, field
@@ -71,6 +70,7 @@ from swarmloc.agents.laser.localizer import (
     RadioMessage,
     Sighting,
 )
+from swarmloc.config import did_you_mean
 from swarmloc.world.laser.laser import (
     LaserParams,
     MotionNoise,
@@ -165,8 +165,7 @@ class DriverConfig:
 
     def __post_init__(self) -> None:
         if self.mode not in DRIVER_MODES:
-            close = difflib.get_close_matches(str(self.mode), DRIVER_MODES, n=1)
-            hint = f"; did you mean '{close[0]}'?" if close else ""
+            hint = did_you_mean(str(self.mode), DRIVER_MODES, 0.6)
             raise ValueError(f"mode: unknown driver mode {self.mode!r}{hint} "
                              f"(known: {', '.join(DRIVER_MODES)})")
         _finite(self.speed_mps, "speed_mps", positive=True)
@@ -244,8 +243,7 @@ class LaserWorldConfig:
 
     def __post_init__(self) -> None:
         if not isinstance(self.map, str) or self.map not in MAPS.names():
-            close = difflib.get_close_matches(str(self.map), MAPS.names(), n=1)
-            hint = f"; did you mean '{close[0]}'?" if close else ""
+            hint = did_you_mean(str(self.map), MAPS.names(), 0.6)
             raise ValueError(f"map: unknown map {self.map!r}{hint} (known: {', '.join(MAPS.names())})")
         _integer(self.robots, "robots", 1, MAX_ROBOTS)
         _integer(self.steps, "steps", 1)

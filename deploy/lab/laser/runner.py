@@ -53,7 +53,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import difflib
 import functools
 import hashlib
 import json
@@ -76,7 +75,14 @@ from swarmloc.agents.laser.registry import (
     AlgorithmRegistry,
     default_algorithms,
 )
-from swarmloc.config import ConfigError, apply_overrides, from_dict, load_toml, to_dict
+from swarmloc.config import (
+    ConfigError,
+    apply_overrides,
+    did_you_mean,
+    from_dict,
+    load_toml,
+    to_dict,
+)
 from swarmloc.world.laser.maps import MAPS, SegmentMap
 from swarmloc.world.laser.scoring import MetricsConfig, pose_errors, summarize
 from swarmloc.world.laser.world import WORLD_STREAM, LaserWorld, LaserWorldConfig
@@ -163,8 +169,7 @@ def load_laser_scenario(name_or_path: str | Path, overrides: list[str] = ()) -> 
     else:
         names = laser_scenario_names()
         if str(name_or_path) not in names:
-            close = difflib.get_close_matches(str(name_or_path), names, n=1, cutoff=0.4)
-            hint = f"; did you mean '{close[0]}'?" if close else ""
+            hint = did_you_mean(str(name_or_path), names, 0.4)
             raise ConfigError(f"laser scenario '{name_or_path}': no such file or shipped scenario"
                               f"{hint} (shipped: {', '.join(names)})")
         data = load_toml(Path(str(_scenarios_folder() / f"{name_or_path}.toml")))

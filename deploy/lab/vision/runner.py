@@ -65,7 +65,14 @@ from swarmloc.agents.vision.brain import (
     detections_from_blobs,
 )
 from swarmloc.agents.vision.detection import detect_blobs
-from swarmloc.config import ConfigError, apply_overrides, from_dict, load_toml, to_dict
+from swarmloc.config import (
+    ConfigError,
+    apply_overrides,
+    did_you_mean,
+    from_dict,
+    load_toml,
+    to_dict,
+)
 from swarmloc.protocol.keys import Keys
 from swarmloc.world.vision.camera import OBJECT_KINDS, CameraParams, make_object, render
 from swarmloc.world.vision.world import (
@@ -207,10 +214,7 @@ def load_vision_scenario(name_or_path: str, overrides: list[str] = ()) -> Vision
     path = Path(name_or_path)
     if path.suffix != ".toml":
         if name_or_path not in scenario_names():
-            import difflib
-
-            close = difflib.get_close_matches(name_or_path, scenario_names(), n=1, cutoff=0.4)
-            hint = f"; did you mean '{close[0]}'?" if close else ""
+            hint = did_you_mean(str(name_or_path), scenario_names(), 0.4)
             raise ConfigError(
                 f"vision scenario '{name_or_path}': not shipped{hint} "
                 f"(shipped: {', '.join(scenario_names())})"
