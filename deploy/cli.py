@@ -376,7 +376,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--act-timeout-s", type=float, default=10.0)
     p.add_argument("--checkpoint-s", type=float, default=5.0,
                    help="write the results so far to --out this often (wall seconds)")
-    p.add_argument("--join-timeout-s", type=float, default=180.0)
+    p.add_argument("--join-timeout-s", type=float, default=180.0,
+                   help="give up when no new agent joined for this long (agents still arriving: wait)")
     observe_cli.add_world_arguments(p)
     p.set_defaults(func=main_world)
 

@@ -455,3 +455,34 @@ def test_router_restart_mid_run_and_the_run_completes(tmp_path):
     result = json.loads((tmp_path / "out" / "results.json").read_text())
     assert result["reason"] == "completed" and result["transport"]["ticks"] == 3000
     assert all(all(s.alive) for s in states[-3:]), "every robot is back by the end of the run"
+
+
+def test_the_world_waits_for_agents_while_they_keep_arriving(tmp_path):
+    # Issue 47: 1,000 agents failed after start-up ("the world-server failed (exit 3)"): a fixed
+    # join deadline. --join-timeout-s is now the longest wait without a new agent: here agents
+    # arrive 2 s apart against a 3 s timeout, 4 s in all; then a run whose third agent never
+    # comes ends with code 3 naming it.
+    from swarmloc.deploy.launch import start_announcing
+
+    _, path = _scenario(tmp_path, ["world.robots=3", "world.duration_s=5.0"])
+    for case, agents in (("all", (0, 1, 2)), ("missing", (0, 1))):
+        run = "j" + uuid.uuid4().hex[:10]
+        out = tmp_path / case
+        with supervised() as sup:
+            world, endpoint = start_announcing(sup, ["world", str(path), "-m", "router", "-l", "tcp/127.0.0.1:0",
+                                                     "--run", run, "--out", str(out), "--announce",
+                                                     "--join-timeout-s", "3"], log_path=tmp_path / f"world-{case}.log")
+            for k, robot in enumerate(agents):
+                if k:
+                    time.sleep(2.0)  # the arrivals' spacing is the condition under test
+                sup.start(["agent", "--robot", str(robot), "-m", "client", "-e", endpoint, "--run", run],
+                          log_path=tmp_path / f"agent-{case}-{robot}.log")
+            code = world.wait(timeout=120)
+        log_text = (tmp_path / f"world-{case}.log").read_text()
+        if case == "all":
+            assert code == 0, log_text[-2000:]
+            result = json.loads((out / "results.json").read_text())
+            assert result["reason"] == "completed" and result["transport"]["join_s"] >= 4.0
+        else:
+            assert code == 3
+            assert "agents missing: no new agent for 3 s (2 of 3 joined" in log_text and "robots [2]" in log_text

@@ -62,6 +62,7 @@ class TickStats:
     #: the machine swapped, no agent was alive) and restarted from now instead of catching up
     stalls: int = 0
     stalled_s: float = 0.0  # the real time those stalls skipped
+    join_s: float | None = None  # from the world's declaration to the last agent's join
     rejoins: int = 0  # agents that came back after their liveliness token went
     rejoin_away_s: list = field(default_factory=list)  # how long each was gone
     #: the first overruns, where the time went: tick, the tick's phases (ms) and how late the
@@ -93,6 +94,7 @@ class TickStats:
             "overruns_after_1s": self.overruns_after_1s,
             "stalls": self.stalls,
             "stalled_s": round(self.stalled_s, 3),
+            "join_s": round(self.join_s, 3) if self.join_s is not None else None,
             "rejoins": self.rejoins,
             "rejoin_away_s_max": round(max(self.rejoin_away_s), 3) if self.rejoin_away_s else None,
             "overrun_ticks": self.overrun_ticks,
@@ -240,16 +242,32 @@ class WorldServer:
         self._token = s.liveliness().declare_token(k.world_alive)
 
     def wait_for_agents(self) -> bool:
-        """Block until every robot has joined and holds a liveliness token."""
-        deadline = time.monotonic() + self.join_timeout_s
+        """Block until every robot has joined and holds a liveliness token. ``join_timeout_s`` is
+        the longest wait *without progress*: while agents keep arriving the world waits for the
+        rest (a thousand agents on two cores take minutes to start, and a fixed deadline failed
+        such runs after start-up, issue 47); it logs how many are in every 10 s. The time to the
+        last one is ``join_s`` in the results."""
+        started = time.monotonic()
+        deadline = started + self.join_timeout_s
+        last_count, next_log = -1, started + 10.0
         with self._cond:
             while not (self._live.all() and self._joined.all()):
-                left = deadline - time.monotonic()
+                now = time.monotonic()
+                count = int((self._live & self._joined).sum())
+                if count > last_count:
+                    last_count, deadline = count, now + self.join_timeout_s
+                if now >= next_log:
+                    log.warning("%d of %d agents joined after %.0f s; waiting for the rest", count,
+                                self.world.n_robots, now - started)
+                    next_log = now + 10.0
+                left = deadline - now
                 if left <= 0 or self._stop.is_set():
                     missing = np.flatnonzero(~(self._live & self._joined)).tolist()
-                    log.error("agents missing after %.0f s: robots %s", self.join_timeout_s, missing)
+                    log.error("agents missing: no new agent for %.0f s (%d of %d joined in %.0f s); robots %s",
+                              self.join_timeout_s, count, self.world.n_robots, now - started, missing)
                     return False
                 self._cond.wait(min(left, 0.5))
+        self.stats.join_s = time.monotonic() - started
         return True
 
     def stop(self) -> None:
