@@ -188,11 +188,16 @@ def main_world(args) -> int:
 
     with open_session(config_from_args(args)) as session:
         from swarmloc.deploy.observe.tap import WorldTap
+        from swarmloc.families import FAMILIES
 
         served = served_world(scenario)
+        viewable = FAMILIES.get(scenario.family).frames is not None
+        if args.record and not viewable:
+            raise ConfigError(f"--record: family {scenario.family!r} has no frame source (Family.frames), "
+                              "so its runs cannot be recorded")
         tap = WorldTap(served, session=session, keys=keys, record=args.record,
                        record_messages=args.record_messages, max_hz=args.frame_hz,
-                       labels={"run": args.run, "scenario": scenario.name})
+                       labels={"run": args.run, "scenario": scenario.name}) if viewable else None
         server = WorldServer(session, keys, served, scenario.to_dict(),
                              realtime=args.realtime, act_timeout_s=args.act_timeout_s,
                              join_timeout_s=args.join_timeout_s,
@@ -214,7 +219,8 @@ def main_world(args) -> int:
                 code = 0 if result["reason"] == "completed" else 4
         finally:
             server.close()
-            tap.close()
+            if tap is not None:
+                tap.close()
     if out:
         write_results(result)
     else:

@@ -97,6 +97,16 @@ class Scenario:
         if self.family != "foraging":
             raise ConfigError(f"family: {self.family!r} is not an e-puck foraging scenario")
 
+    @property
+    def n_ticks(self) -> int:
+        """Ticks of a run (``swarmloc.families.Family``'s scenario contract)."""
+        return self.world.n_ticks
+
+    @property
+    def label(self) -> str:
+        """What tells runs of this scenario apart: the strategy."""
+        return self.agent.strategy
+
     def to_dict(self) -> dict:
         return to_dict(self)
 
@@ -181,22 +191,14 @@ class AnyScenario:
 
     @property
     def n_ticks(self) -> int:
-        world = self.scenario.world
-        if self.family == "foraging":
-            return world.n_ticks
-        if self.family == "vision":
-            return round(self.scenario.setup.duration_s / world.tick_s)
-        return world.steps
+        """Ticks of a run: the family's scenario class says (its ``n_ticks``)."""
+        return self.scenario.n_ticks
 
     @property
     def label(self) -> str:
-        """What distinguishes runs of one scenario: the strategy, the algorithm, ..."""
-        if self.family == "foraging":
-            return self.scenario.agent.strategy
-        if self.family == "vision":
-            return "sharing" if self.scenario.agent.sharing else "no-sharing"
-        algorithm = getattr(self.scenario, "algorithm", None)
-        return getattr(algorithm, "name", self.family)
+        """What distinguishes runs of one scenario (the strategy, the algorithm, ...): the
+        family's scenario class says (its ``label``)."""
+        return self.scenario.label
 
     def to_dict(self) -> dict:
         return {"family": self.family, **self.scenario.to_dict()}
@@ -207,10 +209,9 @@ def family_of(data: dict) -> str:
 
     family = data.get("family", "foraging")
     try:
-        FAMILIES.get(family)
+        return FAMILIES.canonical(family)
     except ValueError as exc:
         raise ConfigError(f"family: {exc}") from None
-    return family
 
 
 def scenario_from_dict(data: dict) -> AnyScenario:

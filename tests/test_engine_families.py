@@ -9,6 +9,7 @@ Expected values come from the runners called directly (``run_vision``, ``run_rep
 from __future__ import annotations
 
 import csv
+import dataclasses
 import textwrap
 
 import numpy as np
@@ -19,6 +20,7 @@ from swarmloc.config import ConfigError
 from swarmloc.deploy.cli import main as cli_main
 from swarmloc.deploy.lab.experiment import (
     FAMILIES,
+    family,
     list_specs,
     load_spec,
     plan,
@@ -26,7 +28,8 @@ from swarmloc.deploy.lab.experiment import (
     shipped_specs,
     with_overrides,
 )
-from swarmloc.deploy.lab.report import TEMPLATES, results_family
+from swarmloc.deploy.lab.report import results_family, template, template_names
+from swarmloc.families import FAMILIES as ROBOT_FAMILIES
 from swarmloc.registry import Registry
 
 
@@ -41,32 +44,53 @@ def write_spec(tmp_path, text: str, name: str = "spec.toml"):
 # ---------------------------------------------------------------------------------------------
 
 
-def test_families_and_templates_are_registries_of_the_four_families():
-    for registry in (FAMILIES, TEMPLATES):
-        assert isinstance(registry, Registry)
-        # the report templates add the generic page of any spec's rows
-        extra = {"generic"} if registry is TEMPLATES else set()
-        assert set(registry.names()) == {"epuck", "laser", "vision", "replay"} | extra
-        with pytest.raises(ValueError, match="already registered"):
-            registry.register("vision", "x:y")
+def test_one_registry_holds_each_familys_experiment_hooks_and_report():
+    # Issue 48: one Family definition; the engine's and the reports' families are its entries
+    assert FAMILIES is ROBOT_FAMILIES and isinstance(FAMILIES, Registry)
+    assert set(FAMILIES.names()) >= {"foraging", "laser", "vision", "replay"}
+    assert template_names() == [*FAMILIES.names(), "generic"]
     for name in FAMILIES:
-        hooks = FAMILIES.load(name)
+        hooks = family(name)
         for hook in ("settings", "run_job", "columns", "row"):
             assert callable(getattr(hooks, hook)), (name, hook)
-        assert TEMPLATES.load(name).family == name
+        assert template(name).family == name
+    # the e-puck family's former experiment name still works, and names the same entry
+    assert FAMILIES.get("epuck") is FAMILIES.get("foraging") and "epuck" not in FAMILIES.names()
+    assert FAMILIES.canonical("epuck") == "foraging" and family("epuck") is family("foraging")
+    with pytest.raises(ValueError, match="already registered"):
+        FAMILIES.register("vision", FAMILIES.get("vision"))
+
+
+def test_a_family_without_experiment_hooks_or_frames_is_refused_by_name(tmp_path):
+    from swarmloc.deploy.observe.frames import frame_source
+    from swarmloc.families import Family
+
+    FAMILIES.register("bare", dataclasses.replace(FAMILIES.get("laser"), experiment=None, report=None, frames=None))
+    try:
+        with pytest.raises(ValueError, match="family 'bare' has no experiment hooks"):
+            family("bare")
+        path = write_spec(tmp_path, 'name = "x"\nfamily = "bare"\n[[group]]\nname = "g"\nscenarios = ["a"]\n')
+        with pytest.raises(ConfigError, match=r"family: expected one of foraging, laser, vision, replay"):
+            load_spec(path)
+        assert template("bare") is template("generic")  # its rows get the generic page
+        with pytest.raises(ValueError, match="family 'bare' has no frame source"):
+            frame_source(type("Served", (), {"family": "bare"})())
+        assert isinstance(FAMILIES.get("bare"), Family)
+    finally:
+        FAMILIES.unregister("bare")
 
 
 def test_unknown_family_names_the_known_ones(tmp_path):
     path = write_spec(tmp_path, 'name = "x"\nfamily = "visoin"\n[[group]]\nname = "g"\n'
                                 'scenarios = ["vision-exp1"]\n')
-    with pytest.raises(ConfigError, match=r"family: expected one of epuck, laser, vision, replay"):
+    with pytest.raises(ConfigError, match=r"family: expected one of foraging, laser, vision, replay"):
         load_spec(path)
 
 
 def test_list_shows_every_shipped_spec_of_every_family(capsys):
     listed = {name: (family, jobs) for name, family, jobs, _ in list_specs()}
     assert set(listed) == set(shipped_specs())
-    assert {f for f, _ in listed.values()} == {"epuck", "laser", "vision", "replay"}
+    assert {f for f, _ in listed.values()} == {"foraging", "laser", "vision", "replay"}
     assert listed["vision"] == ("vision", 3 * 2 * 30 + 2 * 3 * 3 * 30 + 3 * 2 * 30 + 4 * 30)
     # global: 4 algorithms x alone/coop x 40 seeds; deterministic: 3 x 2; kidnap: 4 x 2 x 3
     # seeds; stochastic: 3 x 2 x 3 seeds; reference: 2 x 2 x 2 calibrations; each camera on

@@ -6,6 +6,6 @@ engine is :mod:`~swarmloc.deploy.lab.report` (``swarmloc report``: its family-fr
 registry of each family's template); :mod:`~swarmloc.deploy.lab.netns`
 builds a multi-host lab in Linux network namespaces; :mod:`~swarmloc.deploy.lab.executors` runs an
 experiment's jobs on the local process pool or a Dask cluster. Each robot family's runner, experiment hooks
-(``experiment.py``, registered in the engine's ``FAMILIES``) and report template (``report.py``) sit
+(``experiment.py``, named by the family's entry in ``swarmloc.families.FAMILIES``) and report template (``report.py``) sit
 in its own folder (``epuck/``, ``laser/``, ``vision/``, ``replay/``).
 """

@@ -31,9 +31,10 @@ scenario, seed, replication, one column per grid key, the family's measures, wal
 config_hash (the scenario without its seed): a file whose rows were made with another
 configuration is refused rather than mixed.
 
-Every robot family runs through this engine: a spec's ``family`` (default ``"epuck"``) names an
-entry of :data:`FAMILIES`, the module that builds its settings, runs one job and gives its
-columns and rows (:class:`Family`); the spec format, checks, plan, executors, resume, progress
+Every robot family runs through this engine: a spec's ``family`` (default ``"foraging"``, also
+called ``"epuck"``) names an entry of :data:`FAMILIES` (``swarmloc.families``, the one registry
+of families), whose ``experiment`` is the module that builds its settings, runs one job and gives
+its columns and rows (:class:`Family`); the spec format, checks, plan, executors, resume, progress
 and the results file are these, whatever the family. A group may give its own ``replications``
 (at most the spec's ``--replications`` when that is given) and a ``description``;
 ``swarmloc experiment SPEC --set KEY=VALUE`` fixes a scenario key in every group (e.g. where
@@ -66,7 +67,8 @@ from swarmloc.deploy.lab.executors import (
     make_executor,
     sigterm_as_interrupt,
 )
-from swarmloc.registry import Registry, load_plugins
+from swarmloc.families import FAMILIES as _FAMILIES
+from swarmloc.registry import load_plugins, resolve
 
 _NAME = re.compile(r"^[A-Za-z0-9_-]+$")
 #: A scenario key: dotted (``agent.strategy``) or, for families whose scenarios are flat tables
@@ -97,20 +99,27 @@ class Family(Protocol):
     def row(self, spec: ExperimentSpec, job: Job, out: dict) -> list: ...
 
 
-#: Robot families an experiment can run, by the name a spec's ``family`` gives; each entry is
-#: the module (imported when first used) of :class:`Family`'s hooks. Plugins register more.
-FAMILIES: Registry[str] = Registry("experiment family")
-FAMILIES.register("epuck", "swarmloc.deploy.lab.epuck.experiment")
-FAMILIES.register("laser", "swarmloc.deploy.lab.laser.experiment")
-FAMILIES.register("vision", "swarmloc.deploy.lab.vision.experiment")
-FAMILIES.register("replay", "swarmloc.deploy.lab.replay.experiment")
+#: The robot families (one registry, ``swarmloc.families``): a family runs in experiments when its
+#: ``Family.experiment`` names the module of its hooks. Plugins register more.
+FAMILIES = _FAMILIES
+
+
+def experiment_families() -> list[str]:
+    """The families whose entries have experiment hooks (plugins loaded)."""
+    load_plugins()
+    return [name for name, entry in FAMILIES.items() if entry.experiment is not None]
 
 
 def family(name: str) -> Family:
-    """The hooks module of family ``name`` (plugins loaded first if it is not registered)."""
+    """The hooks module of family ``name`` (plugins loaded first if it is not registered);
+    ValueError if it has none."""
     if name not in FAMILIES:
         load_plugins()
-    return FAMILIES.load(name)
+    entry = FAMILIES.get(name)
+    if entry.experiment is None:
+        raise ValueError(f"family {name!r} has no experiment hooks (its Family.experiment is None); "
+                         f"families with them: {', '.join(experiment_families())}")
+    return resolve(entry.experiment)
 
 
 # -- the spec ---------------------------------------------------------------------------------
@@ -244,16 +253,18 @@ class ExperimentSpec:
     replications: int = 30
     seed: int = 1
     group: tuple[GroupSpec, ...] = ()
-    #: Which robots the scenarios are (a key of :data:`FAMILIES`).
-    family: str = "epuck"
+    #: Which robots the scenarios are (a family of :data:`FAMILIES`, with experiment hooks;
+    #: "epuck" names the foraging e-pucks too).
+    family: str = "foraging"
 
     def __post_init__(self):
         if not _NAME.match(self.name):
             raise ValueError(f"name: expected letters, digits, '_' or '-', got {self.name!r}")
         if self.family not in FAMILIES:
             load_plugins()
-        if self.family not in FAMILIES:
-            raise ValueError(f"family: expected one of {', '.join(FAMILIES)}, got {self.family!r}")
+        if self.family not in FAMILIES or FAMILIES.get(self.family).experiment is None:
+            raise ValueError(f"family: expected one of {', '.join(experiment_families())}, got {self.family!r}")
+        object.__setattr__(self, "family", FAMILIES.canonical(self.family))
         if self.replications < 1:
             raise ValueError(f"replications: must be >= 1, got {self.replications}")
         if not (0 <= self.seed and self.seed + self.replications - 1 < 2**63):
@@ -424,7 +435,7 @@ class Job:
     config_hash: str = ""
     #: Robot-ticks: the relative cost used to weigh progress.
     cost: int = 1
-    family: str = "epuck"
+    family: str = "foraging"
 
 
 def value_text(value) -> str:

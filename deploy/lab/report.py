@@ -12,7 +12,7 @@ state); and the page's figure list and markdown escaping. The e-puck report
 It is also the report command, ``swarmloc report RESULTS.csv [RESULTS.csv ...] [--out DIR]``:
 the results files name their family (the ``experiment`` column's shipped spec, else the columns
 its results files always have, else ``--family``), and that family's template
-(:data:`TEMPLATES`, a :class:`ReportTemplate`) writes the page and the figures: e-puck
+(its ``Family.report``, a :class:`ReportTemplate`) writes the page and the figures: e-puck
 ``deploy/lab/epuck/report.py``, laser ``deploy/lab/laser/report.py``, vision
 ``deploy/lab/vision/report.py``, replay ``deploy/lab/replay/report.py``.
 """
@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from swarmloc.config import ConfigError
-from swarmloc.registry import Registry
+from swarmloc.registry import resolve
 
 # -- the papers' claims -----------------------------------------------------------------------
 
@@ -321,18 +321,32 @@ class ReportTemplate:
     write: Callable[[list[Path], argparse.Namespace], Path]
 
 
-#: Report templates by family (the names of :data:`swarmloc.deploy.lab.experiment.FAMILIES`),
-#: each a ``"module:attribute"`` of a :class:`ReportTemplate`, imported when used.
-TEMPLATES: Registry[str] = Registry("report template")
-TEMPLATES.register("epuck", "swarmloc.deploy.lab.epuck.report:TEMPLATE")
-TEMPLATES.register("laser", "swarmloc.deploy.lab.laser.report:TEMPLATE")
-TEMPLATES.register("vision", "swarmloc.deploy.lab.vision.report:TEMPLATE")
-TEMPLATES.register("replay", "swarmloc.deploy.lab.replay.report:TEMPLATE")
 #: Any spec's results, read as they are (a user's own experiment): deploy/lab/generic_report.py.
 GENERIC = "generic"
-TEMPLATES.register(GENERIC, "swarmloc.deploy.lab.generic_report:TEMPLATE")
+_GENERIC_TEMPLATE = "swarmloc.deploy.lab.generic_report:TEMPLATE"
+
+
+def template_names() -> list[str]:
+    """``--family`` values: every family (``swarmloc.families``) with a report template, then
+    :data:`GENERIC`."""
+    from swarmloc.families import FAMILIES
+
+    return [name for name, entry in FAMILIES.items() if entry.report is not None] + [GENERIC]
+
+
+def template(name: str) -> ReportTemplate:
+    """The report template of family ``name`` (its ``Family.report``), or the generic page's;
+    a family without its own template is reported by the generic page. ValueError if unknown."""
+    from swarmloc.families import FAMILIES
+
+    if name == GENERIC:
+        return resolve(_GENERIC_TEMPLATE)
+    entry = FAMILIES.get(name)
+    return resolve(entry.report if entry.report is not None else _GENERIC_TEMPLATE)
+
+
 #: The family of a file nothing else tells (its template's loader names what is missing).
-DEFAULT_FAMILY = "epuck"
+DEFAULT_FAMILY = "foraging"
 
 
 def _header_and_experiments(path: Path) -> tuple[list[str], set[str]]:
@@ -352,8 +366,11 @@ def results_family(paths: Sequence[Path], family: str | None = None) -> str:
     shipped spec each file's ``experiment`` names, else the template whose columns the file has,
     else :data:`DEFAULT_FAMILY`. Files of two families are a ConfigError."""
     if family is not None:
-        TEMPLATES.get(family)
-        return family
+        if family == GENERIC:
+            return family
+        from swarmloc.families import FAMILIES
+
+        return FAMILIES.canonical(family)
     from swarmloc.deploy.lab.experiment import load_spec, shipped_specs
 
     shipped = set(shipped_specs())
@@ -364,8 +381,8 @@ def results_family(paths: Sequence[Path], family: str | None = None) -> str:
         for name in sorted(experiments & shipped):
             families.add(load_spec(name).family)
         if not families:
-            families = {name for name in TEMPLATES
-                        if name != GENERIC and TEMPLATES.load(name).columns <= set(header)}
+            families = {name for name in template_names()
+                        if name != GENERIC and template(name).columns <= set(header)}
         if len(families) > 1:
             raise ConfigError(f"{path}: rows of families {', '.join(sorted(families))}; "
                               f"give --family or one file per family")
@@ -385,8 +402,7 @@ def main_report(args) -> int:
             raise ConfigError(f"{path}: no such results file (write one with `swarmloc experiment "
                               "SPEC`)")
     name = results_family(paths, args.family)
-    template: ReportTemplate = TEMPLATES.load(name)
-    page = template.write(paths, args)
+    page = template(name).write(paths, args)
     out = page.parent
     print(f"wrote {page} ({name} report, {len(sorted(out.glob('*.png')))} figures in {out})")
     if name != GENERIC and not _shipped_experiments(paths):

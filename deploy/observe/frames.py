@@ -311,10 +311,14 @@ class ReplaySource(FrameSource):
                                             "position_error_m": _mean_error(truth, estimates)}}
 
 
-SOURCES = {"foraging": ForagingSource, "laser": LaserSource, "vision": VisionSource,
-           "replay": ReplaySource}
-
-
 def frame_source(service) -> FrameSource:
-    """The frame source of a served world, by its family."""
-    return SOURCES[service.family](service)
+    """The frame source of a served world: its family's ``Family.frames`` (``swarmloc.families``);
+    ValueError if the family has none (it can run, but not be viewed or recorded)."""
+    from swarmloc.families import FAMILIES
+    from swarmloc.registry import resolve
+
+    frames = FAMILIES.get(service.family).frames
+    if frames is None:
+        raise ValueError(f"family {service.family!r} has no frame source (Family.frames): "
+                         "its runs cannot be viewed or recorded")
+    return resolve(frames)(service)

@@ -81,7 +81,7 @@ _POSE3_OR_NULL = {"oneOf": [_POSE3, {"type": "null"}]}
 FRAME_SCHEMA = _obj({
     "tick": {"type": "integer", "minimum": 0},
     "time_s": _num(),
-    "family": {"type": "string", "enum": ["foraging", "laser", "vision", "replay"]},
+    "family": {"type": "string"},  # a family of swarmloc.families (plugins' too)
     "state": _obj({"tick": {"type": "integer"}, "time_s": _num(), "poses": _arr(_POSE3),
                    "alive": _arr({"type": "boolean"}), "round_trips": {"type": "integer"}},
                   ["tick", "time_s", "poses", "alive", "round_trips"]),

@@ -34,10 +34,6 @@ if TYPE_CHECKING:  # pragma: no cover
 
 __all__ = ["batch", "experiment", "read_recording", "read_results", "replay", "report", "run"]
 
-#: Robot family (``swarmloc.families``) -> experiment family (``deploy.lab.experiment.FAMILIES``).
-_EXPERIMENT_FAMILY = {"foraging": "epuck"}
-
-
 def _overrides(family: str, settings: Mapping[str, Any]) -> list[str]:
     """``KEY=VALUE`` overrides (values as JSON, which TOML reads alike) from keyword settings:
     a family flag by its short name, any other key dotted or with ``__`` for the dots."""
@@ -105,7 +101,7 @@ def batch(scenario: str = "ES1", *, seeds: int | Iterable[int] = 1, grid: Mappin
     for item in overrides:
         key, _, text = item.partition("=")
         fixed[key] = json.loads(text)
-    family = _EXPERIMENT_FAMILY.get(loaded.family, loaded.family)
+    family = loaded.family
     spec = ExperimentSpec(name="batch", description=f"swarmloc.batch({scenario!r})", replications=replications,
                           seed=first, family=family,
                           group=(GroupSpec(name="batch", scenarios=(scenario,), grid=dict(grid or {}) or None,

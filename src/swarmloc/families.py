@@ -32,7 +32,20 @@ class Family:
       data, where only the brains' generators take it);
     - ``compiled_kernels``: its world or brains run swarmloc's numba kernels (deploy/warm.py), so
       a run compiles them first, once per machine; a family without them starts at once (a
-      laser run compiled the e-puck kernels it never calls: 79 of its first 91 s, issue 48).
+      laser run compiled the e-puck kernels it never calls: 79 of its first 91 s, issue 48);
+    - ``frames``: ``service -> FrameSource`` (``swarmloc.deploy.observe.frames``), what the view
+      and the recorder draw of a served world (None: the run is neither viewed nor recorded);
+    - ``experiment``: the module of the experiment engine's hooks
+      (``swarmloc.deploy.lab.experiment.Family``: ``settings``, ``run_job``, ``columns``, ``row``;
+      None: no ``swarmloc experiment`` for it);
+    - ``report``: its ``swarmloc report`` template (``swarmloc.deploy.lab.report.ReportTemplate``;
+      None: the generic comparison page reports its rows).
+
+    The scenario class also gives ``n_ticks`` (how many ticks a run lasts) and ``label`` (what
+    tells runs of one scenario apart: the strategy, the algorithm), which the shells print.
+    One registry holds every family, under one name; ``FAMILIES.alias`` keeps a former name
+    working (the e-puck family is "foraging", and "epuck" as experiment specs and reports called
+    it before issue 48).
     """
 
     scenario: object
@@ -41,6 +54,9 @@ class Family:
     flags: dict = field(default_factory=dict)
     seeded_world: bool = True
     compiled_kernels: bool = False
+    frames: object = None
+    experiment: object = None
+    report: object = None
 
 
 def needs_kernels(family: str | None) -> bool:
@@ -57,20 +73,28 @@ FAMILIES.register("foraging", Family(
     world="swarmloc.world.epuck.service:_foraging",
     brain="swarmloc.agents.epuck.agent:ForagingAgent.from_welcome",
     flags={"robots": "world.robots", "strategy": "agent.strategy", "beta": "agent.beta",
-           "seed": "world.seed", "duration_s": "world.duration_s"}, compiled_kernels=True))
+           "seed": "world.seed", "duration_s": "world.duration_s"}, compiled_kernels=True,
+    frames="swarmloc.deploy.observe.frames:ForagingSource",
+    experiment="swarmloc.deploy.lab.epuck.experiment", report="swarmloc.deploy.lab.epuck.report:TEMPLATE"))
+FAMILIES.alias("epuck", "foraging")
 FAMILIES.register("laser", Family(
     scenario="swarmloc.deploy.lab.laser.runner:LaserScenario",
     world="swarmloc.world.laser.service:LaserService",
     brain="swarmloc.agents.laser.agent:LaserAgent.from_welcome",
-    flags={"robots": "world.robots", "seed": "world.seed", "algorithm": "algorithm.name"}))
+    flags={"robots": "world.robots", "seed": "world.seed", "algorithm": "algorithm.name"},
+    frames="swarmloc.deploy.observe.frames:LaserSource",
+    experiment="swarmloc.deploy.lab.laser.experiment", report="swarmloc.deploy.lab.laser.report:TEMPLATE"))
 FAMILIES.register("vision", Family(
     scenario="swarmloc.deploy.lab.vision.runner:VisionScenario",
     world="swarmloc.world.vision.service:VisionService",
     brain="swarmloc.agents.vision.agent:VisionAgent.from_welcome",
-    flags={"seed": "world.seed", "duration_s": "setup.duration_s"}))
+    flags={"seed": "world.seed", "duration_s": "setup.duration_s"},
+    frames="swarmloc.deploy.observe.frames:VisionSource",
+    experiment="swarmloc.deploy.lab.vision.experiment", report="swarmloc.deploy.lab.vision.report:TEMPLATE"))
 FAMILIES.register("replay", Family(
     scenario="swarmloc.world.replay.service:ReplayScenario",
     world="swarmloc.world.replay.service:ReplayService",
     brain="swarmloc.agents.replay.agent:ReplayAgent.from_welcome",
     flags={"seed": "seed", "duration_s": "duration_s", "algorithm": "algorithm"},
-    seeded_world=False))
+    seeded_world=False, frames="swarmloc.deploy.observe.frames:ReplaySource",
+    experiment="swarmloc.deploy.lab.replay.experiment", report="swarmloc.deploy.lab.replay.report:TEMPLATE"))

@@ -99,6 +99,7 @@ class Registry(Generic[T]):
         self._entries: dict[str, T] = {}
         self._origins: dict[str, str] = {}
         self._builtin: dict[str, bool] = {}
+        self._aliases: dict[str, str] = {}
         _REGISTRIES.append(self)
 
     def register(self, name_or_entry: Any, entry: Any = _MISSING) -> T:
@@ -136,6 +137,22 @@ class Registry(Generic[T]):
         """``file:line`` where ``name`` was registered."""
         return self._origins[name]
 
+    def alias(self, alias: str, name: str) -> None:
+        """Let ``alias`` name the entry ``name`` too (a former name kept working: the e-puck
+        family was "epuck" to experiments and "foraging" to scenarios). ``names()`` lists only
+        the entries' own names."""
+        if alias in self._entries or alias in self._aliases:
+            raise ValueError(f"{self.kind} {alias!r} is already registered")
+        self.get(name)
+        self._aliases[alias] = name
+
+    def canonical(self, name: str) -> str:
+        """The entry's own name for ``name`` (itself, or what it is an alias of); ValueError if
+        unknown, as :meth:`get`."""
+        name = self._aliases.get(name, name)
+        self.get(name)
+        return name
+
     def is_builtin(self, name: str) -> bool:
         """Whether ``name`` was registered by the swarmloc package itself (not a plugin)."""
         return self._builtin[name]
@@ -149,7 +166,7 @@ class Registry(Generic[T]):
     def get(self, name: str) -> T:
         """The entry of ``name``; ValueError naming the closest registered names if unknown."""
         try:
-            return self._entries[name]
+            return self._entries[self._aliases.get(name, name)]
         except (KeyError, TypeError):
             hint = did_you_mean(str(name), list(self._entries), 0.4)
             raise ValueError(f"unknown {self.kind} {name!r}{hint} "
@@ -169,7 +186,7 @@ class Registry(Generic[T]):
         return self.get(name)
 
     def __contains__(self, name: object) -> bool:
-        return name in self._entries
+        return name in self._entries or name in self._aliases
 
     def __iter__(self) -> Iterator[str]:
         return iter(tuple(self._entries))

@@ -73,6 +73,16 @@ class ReplayScenario:
     def world(self):  # what the process commands read: seed, robot count, ticks
         return _ReplayFacts(self)
 
+    @property
+    def n_ticks(self) -> int:
+        """Ticks of a run (``swarmloc.families.Family``'s scenario contract)."""
+        return self.world.steps
+
+    @property
+    def label(self) -> str:
+        """What tells runs of this scenario apart: the localizer."""
+        return self.algorithm
+
     def load(self):
         """The data set (read once per scenario object; ConfigError if it cannot be read)."""
         return self._loaded

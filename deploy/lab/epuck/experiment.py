@@ -1,9 +1,9 @@
 """The e-puck foraging family's hooks for the experiment engine (seeds 000-001).
 
-``swarmloc experiment SPEC`` with ``family = "epuck"`` (the default) runs the foraging scenarios
+``swarmloc experiment SPEC`` with ``family = "foraging"`` (the default; ``"epuck"`` too) runs the foraging scenarios
 (``deploy/scenarios/ES*.toml``, ``SO-*.toml``) with the batch engine
 (:func:`swarmloc.deploy.lab.epuck.batch.run_batch`). This module is the family's entry in
-:data:`swarmloc.deploy.lab.experiment.FAMILIES`:
+the ``experiment`` of the family's entry in :data:`swarmloc.families.FAMILIES`:
 
 - :func:`settings`: every setting's scenario built and validated before anything runs (a group's
   ``duration_s`` becomes ``world.duration_s``);

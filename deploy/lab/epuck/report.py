@@ -740,5 +740,5 @@ def write_from_args(paths: list[Path], args) -> Path:
                         results_name=", ".join(map(str, paths)), fixed=fixed, variant=variant)
 
 
-#: This family's template of ``swarmloc report`` (:data:`swarmloc.deploy.lab.report.TEMPLATES`).
-TEMPLATE = ReportTemplate("epuck", frozenset(REQUIRED_COLUMNS), write_from_args)
+#: This family's template of ``swarmloc report`` (named by its ``Family.report``, ``swarmloc.families``).
+TEMPLATE = ReportTemplate("foraging", frozenset(REQUIRED_COLUMNS), write_from_args)

@@ -8,7 +8,7 @@ Specs are ordinary experiment specs (``deploy/experiments/laser-*.toml``) with
 ``section.key`` values, each setting run ``replications`` times with seeds ``seed + r``. The
 machinery of ``swarmloc experiment`` runs them (spec checks, plan, spawned pool, one CSV row per
 finished job, resume, progress); this module supplies what is laser-specific, through the
-hooks of :data:`swarmloc.deploy.lab.experiment.FAMILIES`:
+hooks of :data:`swarmloc.families.FAMILIES` (its entry's ``experiment``):
 
 - :func:`settings`: every setting's scenario built and validated before anything runs (a group's
   ``duration_s`` becomes ``world.steps``);

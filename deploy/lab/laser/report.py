@@ -950,7 +950,7 @@ def _template():
                                               SERIES_COLUMN}), write_from_args)
 
 
-#: This family's template of ``swarmloc report`` (:data:`swarmloc.deploy.lab.report.TEMPLATES`).
+#: This family's template of ``swarmloc report`` (named by its ``Family.report``, ``swarmloc.families``).
 TEMPLATE = _template()
 
 __all__ = [

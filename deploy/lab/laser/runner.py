@@ -133,6 +133,16 @@ class LaserScenario:
     def to_dict(self) -> dict:
         return to_dict(self)
 
+    @property
+    def n_ticks(self) -> int:
+        """Steps of a run (``swarmloc.families.Family``'s scenario contract)."""
+        return self.world.steps
+
+    @property
+    def label(self) -> str:
+        """What tells runs of this scenario apart: the localizer."""
+        return self.algorithm.name
+
     @classmethod
     def from_dict(cls, data: dict) -> LaserScenario:
         return from_dict(cls, data)

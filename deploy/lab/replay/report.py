@@ -294,7 +294,7 @@ def _template():
                                                "heading_rmse_rad"}), write_from_args)
 
 
-#: This family's template of ``swarmloc report`` (:data:`swarmloc.deploy.lab.report.TEMPLATES`).
+#: This family's template of ``swarmloc report`` (named by its ``Family.report``, ``swarmloc.families``).
 TEMPLATE = _template()
 
 __all__ = ["RESULT_COLUMNS", "TEMPLATE", "load_replay_results", "write_from_args", "write_report"]

@@ -5,7 +5,7 @@ A spec with ``family = "vision"`` (shipped: ``deploy/experiments/vision.toml``) 
 scenarios (``deploy/scenarios/vision/``) with :func:`~swarmloc.deploy.lab.vision.runner.run_vision`,
 replication ``r`` with seed ``seed + r`` (the run's seed draws its layout, world and brains; it is
 no scenario key). This module is the family's entry in
-:data:`swarmloc.deploy.lab.experiment.FAMILIES`: :func:`settings`, :func:`run_job`,
+:data:`swarmloc.families.FAMILIES` (its entry's ``experiment``): :func:`settings`, :func:`run_job`,
 :func:`columns` and :func:`row`. Columns: the setting (experiment, group, setting, scenario,
 sharing, seed, replication, one column per grid key), the run's measures
 (:data:`METRIC_COLUMNS`, as :func:`~swarmloc.deploy.lab.vision.runner.run_vision` returns them),

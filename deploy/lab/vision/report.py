@@ -720,5 +720,5 @@ def _template():
                                                "collisions"}), write_from_args)
 
 
-#: This family's template of ``swarmloc report`` (:data:`swarmloc.deploy.lab.report.TEMPLATES`).
+#: This family's template of ``swarmloc report`` (named by its ``Family.report``, ``swarmloc.families``).
 TEMPLATE = _template()

@@ -184,6 +184,16 @@ class VisionScenario:
     world: VisionWorldConfig = field(default_factory=VisionWorldConfig)
     agent: VisionAgentConfig = field(default_factory=VisionAgentConfig)
 
+    @property
+    def n_ticks(self) -> int:
+        """Ticks of a run (``swarmloc.families.Family``'s scenario contract)."""
+        return round(self.setup.duration_s / self.world.tick_s)
+
+    @property
+    def label(self) -> str:
+        """What tells runs of this scenario apart: whether the robots share detections."""
+        return "sharing" if self.agent.sharing else "no-sharing"
+
     def __post_init__(self) -> None:
         if self.family != "vision":
             raise ValueError(f"family: {self.family!r} is not a vision scenario")
