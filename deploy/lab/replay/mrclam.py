@@ -52,6 +52,7 @@ from swarmloc.agents.replay.localizers import (
     build_localizer,
     wrap_angle,
 )
+from swarmloc.agents.replay.colo import COLO_ALGORITHMS
 from swarmloc.world.replay.mrclam import MrclamDataset, load_dataset
 from swarmloc.world.replay.replay import DEFAULT_DT_S, ReplayWorld
 
@@ -63,6 +64,9 @@ REPORT_ALGORITHMS = ("dr", "ekf", "pf", "cfsga", "ssga", "hybrid")
 CALIBRATIONS = ("self", "self-own", "vicon", "none")
 #: ``ReplayConfig.start``.
 STARTS = ("known", "unknown")
+#: ``ReplayConfig.heading``: estimated by the localizer, or the ground truth's given to it
+#: (CoLo-AT's setting; read by CoLo's estimators, ``agents/replay/colo.py``).
+HEADINGS = ("estimate", "truth")
 #: The localizers that can start from an unknown pose (a population over the whole field).
 GLOBAL_ALGORITHMS = ("pf", "cfsga", "ssga", "hybrid")
 #: A kidnap's jump told by the odometry: (distance m along the mid-turn heading, turn rad).
@@ -105,8 +109,30 @@ class ReplayConfig:
     #: teleported; the robot did not move). None: no kidnap.
     kidnap_s: float | None = None
     kidnap_robot: int | None = None
+    #: ``estimate`` (the localizer estimates it) or ``truth``: every observation carries the
+    #: robot's true heading (CoLo-AT's setting, issue 46), which CoLo's estimators use in
+    #: propagation and measurement models (the other localizers cannot: an error).
+    heading: str = "estimate"
+    #: The robots given their landmark readings (None: every robot; CoLo-AT's setting: 1, 2, 3).
+    landmark_robots: tuple[int, ...] | None = None
+    #: Who hears whom: receiver id -> the ids it hears (None: everyone hears everyone;
+    #: CoLo-AT's setting: ``{1: (2,), 2: (3,)}``, robots 3-5 hear nobody).
+    links: Mapping | None = None
 
     def __post_init__(self):
+        if self.heading not in HEADINGS:
+            raise ValueError(f"heading: unknown {self.heading!r} (known: {', '.join(HEADINGS)})")
+        if self.heading == "truth" and self.algorithm not in COLO_ALGORITHMS:
+            raise ValueError(f"heading: 'truth' is read by CoLo's estimators only "
+                             f"({', '.join(COLO_ALGORITHMS)}), not {self.algorithm!r}")
+        if self.landmark_robots is not None:
+            ids = self.landmark_robots
+            if isinstance(ids, (str, bytes)) or not isinstance(ids, (list, tuple)) or \
+                    not all(isinstance(r, int) and not isinstance(r, bool) for r in ids):
+                raise ValueError(f"landmark_robots: expected a list of robot ids, got {ids!r}")
+            object.__setattr__(self, "landmark_robots", tuple(ids))
+        if self.links is not None:
+            object.__setattr__(self, "links", parse_links(self.links))
         if self.algorithm not in ALGORITHMS:
             try:
                 ALGORITHMS.get(self.algorithm)  # the registry's message: closest name, plugins
@@ -149,6 +175,8 @@ class ReplayConfig:
             tags.append(f"{self.start}-start")
         if self.kidnap_s is not None:
             tags.append("kidnap")
+        if self.heading != "estimate":
+            tags.append(f"{self.heading}-heading")
         return " ".join(tags)
 
 
@@ -244,7 +272,36 @@ def replay_world(dataset: MrclamDataset, config: ReplayConfig) -> ReplayWorld:
             raise ValueError(f"kidnap_robot: {rid} is not a robot of {dataset.name} "
                              f"({', '.join(map(str, dataset.robot_ids))})")
         kidnap = (rid, dataset.time_span_s()[0] + config.kidnap_s, KIDNAP_JUMP)
-    return ReplayWorld(dataset, config.dt_s, end_s=end, kidnap=kidnap)
+    return ReplayWorld(dataset, config.dt_s, end_s=end, kidnap=kidnap,
+                       true_heading=config.heading == "truth",
+                       landmark_robots=config.landmark_robots, links=config.links)
+
+
+def parse_links(links) -> dict[int, tuple[int, ...]]:
+    """``links`` as ``{receiver: (senders...)}`` from a mapping (keys may be strings, as TOML
+    writes them) or a string ``"1:2 2:3"`` (receiver:sender,sender ...); ``ValueError`` naming
+    the key."""
+    if isinstance(links, str):
+        pairs = {}
+        for item in links.split():
+            receiver, sep, senders = item.partition(":")
+            if not sep:
+                raise ValueError(f"links: expected RECEIVER:SENDER[,SENDER] items, got {item!r}")
+            pairs[receiver] = senders.split(",") if senders else []
+        links = pairs
+    if not isinstance(links, Mapping):
+        raise ValueError(f"links: expected a mapping receiver -> list of senders, got {links!r}")
+    out = {}
+    for receiver, senders in links.items():
+        try:
+            key = int(receiver)
+            values = tuple(int(v) for v in (senders if isinstance(senders, (list, tuple)) else [senders]))
+        except (TypeError, ValueError):
+            raise ValueError(f"links: robot ids must be integers, got {receiver!r}: {senders!r}") from None
+        if isinstance(receiver, bool) or any(isinstance(v, bool) for v in values):
+            raise ValueError(f"links: robot ids must be integers, got {receiver!r}: {senders!r}")
+        out[key] = values
+    return out
 
 
 def replay_localizer(dataset: MrclamDataset, world: ReplayWorld, config: ReplayConfig, rid: int,
@@ -484,6 +541,16 @@ def add_arguments(p) -> None:
                    help="teleport a robot's estimate this many seconds after the start")
     p.add_argument("--kidnap-robot", type=int, default=None,
                    help="the robot kidnapped (data set id; default the first)")
+    p.add_argument("--heading", default="estimate",
+                   help="estimate (default) or truth: the ground truth's heading given to CoLo's "
+                        "estimators (CoLo-AT's setting)")
+    p.add_argument("--landmark-robots", default=None, metavar="IDS",
+                   help="only these robots get landmark readings, e.g. 1,2,3 (default: all)")
+    p.add_argument("--links", default=None, metavar="LINKS",
+                   help="who hears whom, RECEIVER:SENDER[,SENDER] items, e.g. '1:2 2:3' "
+                        "(default: everyone hears everyone)")
+    p.add_argument("--initial-std", default=None, metavar="X,Y,THETA",
+                   help="std of the known start (default 0.05,0.05,0.05; CoLo-AT: 0.2,0.2,0)")
     p.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
                    help="algorithm parameter, value as JSON (repeatable), e.g. --param fusion=\"sgikf\"")
     p.add_argument("--out", default=None,
@@ -515,11 +582,24 @@ def main(args) -> int:
         raise ValueError(f"--start: unknown value {args.start!r} (known: {', '.join(STARTS)})")
     if not args.calibration_s >= 0:
         raise ValueError(f"--calibration-s must be >= 0, got {args.calibration_s}")
+    extra = {}
+    if args.landmark_robots is not None:
+        try:
+            extra["landmark_robots"] = tuple(int(v) for v in args.landmark_robots.split(",") if v)
+        except ValueError:
+            raise ValueError(f"--landmark-robots: expected robot ids like 1,2,3, got "
+                             f"{args.landmark_robots!r}") from None
+    if args.initial_std is not None:
+        try:
+            extra["initial_std"] = tuple(float(v) for v in args.initial_std.split(","))
+        except ValueError:
+            raise ValueError(f"--initial-std: expected X,Y,THETA, got {args.initial_std!r}") from None
     config = ReplayConfig(algorithm=args.algorithm, cooperative=args.cooperative, seed=args.seed,
                           dt_s=args.dt_s, params=_parse_params(args.param),
                           duration_s=args.duration_s, calibration=args.calibration,
                           calibration_s=args.calibration_s or None, start=args.start,
-                          kidnap_s=args.kidnap_s, kidnap_robot=args.kidnap_robot)
+                          kidnap_s=args.kidnap_s, kidnap_robot=args.kidnap_robot,
+                          heading=args.heading, links=args.links, **extra)
     dataset = load_dataset(args.path)
     try:
         result = run_replay(dataset, config)
