@@ -112,6 +112,7 @@ from swarmloc.agents.replay.localizers import (
 from swarmloc.world.replay.replay import LandmarkObservation
 
 NOISE_MODELS = ("swarmloc", "colo", "colo-unscaled")
+SCI_INDEPENDENT = ("since-broadcast", "paper")
 #: CoLo-AT's odometry variances along and across the heading (``robots/robot_system.py``).
 COLO_ODOMETRY_VAR = (0.01, 0.1)
 #: CoLo-AT's camera variances: range [m^2], bearing [rad^2] (across: times ``r^2``).
@@ -135,8 +136,15 @@ class ColoParams:
     teammate_speed_std_mps: float = 0.1
     teammate_turn_std_rad_s: float = 0.3
     gate_chi2: float = CHI2_2DOF_999
+    #: GS-SCI's independent part: ``since-broadcast`` (only the noise a robot added since it
+    #: last broadcast its state counts as independent: the part is zeroed at each broadcast) or
+    #: ``paper`` (Li and Nashashibi's recursion, never zeroed; see the module docstring).
+    sci_independent: str = "since-broadcast"
 
     def __post_init__(self):
+        if self.sci_independent not in SCI_INDEPENDENT:
+            raise ValueError(f"sci_independent: expected one of {SCI_INDEPENDENT}, got "
+                             f"{self.sci_independent!r}")
         if self.noise_model not in NOISE_MODELS:
             raise ValueError(f"noise_model: expected one of {NOISE_MODELS}, got {self.noise_model!r}")
         w = _real(self.ci_weight, "ci_weight")
@@ -785,30 +793,53 @@ class GlobalStateLocalizer(_ColoBase):
                     joint.heading[k] = reports[rid].pose[2]
         k = joint.index(self.setup.robot_id)
         ev = TickEvents.of(obs)
+        if ev.landmarks.shape[0] or ev.robots.shape[0]:
+            # CoLo-AT fuses what a robot hears when it has taken a measurement; here just before
+            # the measurement is applied, so that a relative reading meets fresh teammate blocks
+            for rid in sorted(states):
+                self._fuse(joint, states[rid])
+            k = joint.index(self.setup.robot_id)
         self._landmarks(joint, k, ev.landmarks)
         if self.setup.cooperative:
             self._relative(joint, k, ev.robots)
-            if ev.landmarks.shape[0] or ev.robots.shape[0]:  # CoLo-AT: after a measurement
-                for rid in sorted(states):
-                    self._fuse(joint, states[rid])
         self._view = joint
         if self.setup.cooperative:
             self._report(obs, encode_extra(joint=joint))
+            if joint.Pi is not None and p.sci_independent == "since-broadcast":
+                joint.Pi = np.zeros_like(joint.Pi)  # broadcast: any teammate may hold it now
 
     def _fuse(self, joint: Joint, state) -> None:
-        ids, _, x, p_other, pi_other = state
+        """A teammate's global state fused into this one: robots it holds that this one does
+        not join (with its estimate, all of it counted as dependent); robots this one holds
+        that it does not are given to the fusion as known to it with a std of
+        :data:`UNKNOWN_STD_M` (so that (split) CI runs over the whole state and leaves them
+        all but unchanged)."""
+        ids, heading, x, p_other, pi_other = state
         d = joint.d
-        common = [(joint.index(r), m) for m, r in enumerate(ids) if joint.index(r) is not None]
-        if len(common) < len(joint.ids):
-            # Fused only once the teammate holds every robot this one holds (a tick or two after
-            # the start): the robots outside would follow by conditioning, which split CI's
-            # independent part cannot (its cross terms would be stale, P - P_i indefinite).
-            return
-        idx = np.concatenate([np.arange(a * d, (a + 1) * d) for a, _ in common])
-        theirs = np.concatenate([np.arange(m * d, (m + 1) * d) for _, m in common])
-        w = ci_fuse(joint, idx, x[theirs], p_other[np.ix_(theirs, theirs)], self.params.ci_weight,
-                    math.inf, None if pi_other is None else pi_other[np.ix_(theirs, theirs)])
+        for m, rid in enumerate(ids):
+            if joint.index(rid) is None and len(joint.ids) < _MAX_TEAM:
+                sl = slice(m * d, (m + 1) * d)
+                cov3 = np.zeros((3, 3))
+                cov3[:d, :d] = p_other[sl, sl]
+                joint.add(rid, np.array([*x[sl][:2], x[sl][2] if d == 3 else heading[m]]), cov3,
+                          np.zeros((3, 3)))
+        n = joint.x.size
+        z = joint.x.copy()
+        z_cov = np.eye(n) * UNKNOWN_STD_M**2
+        z_cov_i = None if pi_other is None else z_cov.copy()
+        theirs = [(joint.index(r), m) for m, r in enumerate(ids) if joint.index(r) is not None]
+        mine = np.concatenate([np.arange(a * d, (a + 1) * d) for a, _ in theirs])
+        other = np.concatenate([np.arange(m * d, (m + 1) * d) for _, m in theirs])
+        z[mine] = x[other]
+        z_cov[np.ix_(mine, mine)] = p_other[np.ix_(other, other)]
+        if z_cov_i is not None:
+            z_cov_i[np.ix_(mine, mine)] = pi_other[np.ix_(other, other)]
+        w = ci_fuse(joint, np.arange(n), z, z_cov, self.params.ci_weight, math.inf, z_cov_i)
         self.fusions += int(w is not None)
+
+
+#: The std given, in a fusion, to a robot the teammate does not hold [m, rad].
+UNKNOWN_STD_M = 100.0
 
 
 def _params(params) -> ColoParams:
