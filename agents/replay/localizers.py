@@ -41,6 +41,10 @@ Algorithms (registry :data:`ALGORITHMS`, built by :func:`build_localizer`):
   fitness terms over the readings of the last two seconds; cooperative: eq. 2, the teammates'
   relative readings against their broadcast beliefs added to the fitness
   (:mod:`swarmloc.agents.replay.ssga_landmarks`).
+- ``ls-cen``, ``ls-bda``, ``ls-ci``, ``gs-ci``, ``gs-sci``: CoLo-AT's cooperative-localization
+  estimators (centralized EKF as a replica in every robot, block-diagonal approximation,
+  local-state and global-state covariance intersection, split CI), each from its paper
+  (:mod:`swarmloc.agents.replay.colo`, issue 46).
 
 Particle filter and GA run their measurement step (correction/generation) on the ticks that
 bring a landmark or teammate measurement and only move their hypotheses with the odometry in
@@ -903,7 +907,7 @@ def _build_ekf_ci(setup, rng, params):
     return EkfLocalizer(setup, params_from_dict(EkfParams, {"fusion": "ci", **params}, "ekf-ci"), rng)
 
 
-register(Algorithm("ekf-ci", "EKF with known landmarks; cooperative: covariance intersection (CoLo's LS-CI)",
+register(Algorithm("ekf-ci", "EKF with known landmarks; cooperative: covariance intersection of position fixes (after CoLo's LS-CI; the paper's is ls-ci)",
                    _build_ekf_ci))
 register(Algorithm("pf", "AMCL-style particle filter; cooperative: teammates' beliefs", _build_pf))
 register(Algorithm("cfsga", "CFS-GA; cooperative: virtual population", _build_cfsga))

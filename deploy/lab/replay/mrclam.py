@@ -378,6 +378,63 @@ def rmse_at_truth_stamps(result: ReplayResult, dataset: MrclamDataset) -> dict[i
     return out
 
 
+def write_tum(result: ReplayResult, out_dir: Path) -> list[Path]:
+    """The estimated and the true trajectory of every robot in the TUM format that evo and
+    others read (``t x y z qx qy qz qw`` a line, ``z = 0``, the heading as a rotation about z):
+    ``estimate_R<id>.tum`` (every tick) and ``groundtruth_R<id>.tum`` (the ticks with ground
+    truth). Returns the paths."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for i, rid in enumerate(result.robot_ids):
+        for name, poses in (("estimate", result.estimates[:, i]), ("groundtruth", result.truth[:, i])):
+            ok = np.isfinite(poses).all(axis=1)
+            half = 0.5 * poses[ok, 2]
+            rows = np.column_stack([result.times_s[ok], poses[ok, 0], poses[ok, 1],
+                                    np.zeros(ok.sum()), np.zeros(ok.sum()), np.zeros(ok.sum()),
+                                    np.sin(half), np.cos(half)])
+            path = out / f"{name}_R{rid}.tum"
+            np.savetxt(path, rows, fmt="%.6f")
+            paths.append(path)
+    return paths
+
+
+def trajectory_errors(result: ReplayResult, rpe_delta_m: float = 1.0) -> dict[int, dict[str, float]]:
+    """Per robot, evo's absolute and relative trajectory error (translation part, no alignment:
+    the estimates are in the landmarks' frame): ``ape_rmse_m``, and ``rpe_rmse_m`` over pose
+    pairs ``rpe_delta_m`` of travel apart (evo's ``Unit.meters``), on the ticks with ground truth
+    (issue 46)."""
+    from evo.core import metrics
+    from evo.core.trajectory import PoseTrajectory3D
+
+    out = {}
+    for i, rid in enumerate(result.robot_ids):
+        ok = np.isfinite(result.truth[:, i]).all(axis=1)
+        if ok.sum() < 2:
+            out[rid] = {"ape_rmse_m": math.nan, "rpe_rmse_m": math.nan}
+            continue
+        trajectories = []
+        for poses in (result.truth[ok, i], result.estimates[ok, i]):
+            half = 0.5 * poses[:, 2]
+            quat = np.column_stack([np.cos(half), np.zeros(half.size), np.zeros(half.size),
+                                    np.sin(half)])
+            xyz = np.column_stack([poses[:, :2], np.zeros(half.size)])
+            trajectories.append(PoseTrajectory3D(positions_xyz=xyz, orientations_quat_wxyz=quat,
+                                                 timestamps=result.times_s[ok]))
+        ape = metrics.APE(metrics.PoseRelation.translation_part)
+        ape.process_data(tuple(trajectories))
+        rpe = metrics.RPE(metrics.PoseRelation.translation_part, delta=rpe_delta_m,
+                          delta_unit=metrics.Unit.meters, all_pairs=False)
+        try:
+            rpe.process_data(tuple(trajectories))
+            rpe_rmse = float(rpe.get_statistic(metrics.StatisticsType.rmse))
+        except Exception:  # noqa: BLE001 -- evo raises its own types when too short a path
+            rpe_rmse = math.nan
+        out[rid] = {"ape_rmse_m": float(ape.get_statistic(metrics.StatisticsType.rmse)),
+                    "rpe_rmse_m": rpe_rmse}
+    return out
+
+
 def localized_from(error_m: np.ndarray, threshold_m: float = LOCALIZED_M) -> int | None:
     """The first tick from which the error (``(T,)``, NaN where unscored) is under
     ``threshold_m`` at every scored tick to the end; None if the last scored tick is not."""
@@ -432,14 +489,19 @@ def consistency(result: ReplayResult) -> dict[int, dict[str, float]]:
     mean over scored ticks of the position's normalized estimation error squared ``e^T P^-1 e``
     (2 for a consistent filter; larger: overconfident), and ``position_nees_in_95``, the share of
     those ticks within the chi-square 95 % quantile for 2 degrees of freedom (0.95 if
-    consistent); NaN without a covariance. Apart from :func:`score`, whose figures the process
+    consistent), and ``position_cov_trace_m2``, the mean trace of the position covariance (what
+    CoLo-AT plots); NaN without a covariance. Apart from :func:`score`, whose figures the process
     path reproduces (an agent process reports its estimate, not its covariance)."""
     nees = position_nees(result)
     out = {}
     for i, rid in enumerate(result.robot_ids):
-        v = nees[np.isfinite(nees[:, i]), i]
+        ok = np.isfinite(nees[:, i])
+        v = nees[ok, i]
+        trace = (np.trace(result.covariance_xy[ok, i], axis1=-2, axis2=-1)
+                 if v.size and result.covariance_xy is not None else np.zeros(0))
         out[rid] = {"position_nees_mean": float(np.mean(v)) if v.size else math.nan,
-                    "position_nees_in_95": float(np.mean(v <= CHI2_2DOF_95)) if v.size else math.nan}
+                    "position_nees_in_95": float(np.mean(v <= CHI2_2DOF_95)) if v.size else math.nan,
+                    "position_cov_trace_m2": float(np.mean(trace)) if trace.size else math.nan}
     return out
 
 
@@ -641,5 +703,11 @@ def main(args) -> int:
              "kidnap_s": config.kidnap_s,
              "params": dict(config.params),
              "robots": {str(k): v for k, v in scores.items()}}, indent=2))
-        print(f"plot: {plot}")
+        tum = write_tum(result, out)
+        errors = trajectory_errors(result)
+        print(f"plot: {plot}; TUM trajectories: {out}/estimate_R*.tum, groundtruth_R*.tum "
+              f"({len(tum)} files)")
+        print("evo APE / RPE (translation, per metre travelled) RMSE [m]: "
+              + ", ".join(f"{rid} {e['ape_rmse_m']:.3f} / {e['rpe_rmse_m']:.3f}"
+                          for rid, e in errors.items()))
     return 0
