@@ -13,7 +13,12 @@ from mrclam_synthetic import SMALL, synthetic_config
 
 from swarmloc.agents.replay import colo
 from swarmloc.agents.replay.colo import ColoParams, Joint, ci_fuse, ekf_update, relative_model
-from swarmloc.agents.replay.localizers import ALGORITHMS, LandmarkSetup, TeammateReport, decode_report
+from swarmloc.agents.replay.localizers import (
+    ALGORITHMS,
+    LandmarkSetup,
+    TeammateReport,
+    decode_report,
+)
 from swarmloc.deploy.lab.replay.mrclam import (
     CHI2_2DOF_95,
     ReplayConfig,
@@ -126,6 +131,16 @@ LANDMARKS = np.array([[3.0, 0.0], [0.0, 3.0]])
 MODEL = "swarmloc"
 
 
+def _reading(rng, setup, position, heading, target):
+    """A range and bearing of ``target`` drawn from the filters' own model: the relative
+    position in the observer's frame plus Gaussian noise of the model's ``R``."""
+    c, s = math.cos(heading), math.sin(heading)
+    z_true = np.array([[c, s], [-s, c]]) @ (target - position)
+    r0, b0 = float(np.hypot(*z_true)), math.atan2(z_true[1], z_true[0])
+    z = z_true + rng.multivariate_normal(np.zeros(2), colo.reading_noise(setup, MODEL, r0, b0))
+    return float(np.hypot(*z)), math.atan2(z[1], z[0])
+
+
 def _simulate(cls, seed: int, ticks: int = 200, dt: float = 0.1):
     """Two robots whose heading is given (the measurement models are then linear): robot 1 reads
     landmark 10 every 20 ticks, the two read each other every tick; motion, readings and the
@@ -153,16 +168,10 @@ def _simulate(cls, seed: int, ticks: int = 200, dt: float = 0.1):
             truth[i] += v * dt * np.array([math.cos(mid[i]), math.sin(mid[i])]) \
                 + rng.multivariate_normal(np.zeros(2), q)
         for i, rid in enumerate((1, 2)):
-            def reading(target):
-                c, s = math.cos(headings[i]), math.sin(headings[i])
-                z_true = np.array([[c, s], [-s, c]]) @ (target - truth[i])
-                r0, b0 = float(np.hypot(*z_true)), math.atan2(z_true[1], z_true[0])
-                z = z_true + rng.multivariate_normal(np.zeros(2), colo.reading_noise(bots[rid].setup, MODEL, r0, b0))
-                return float(np.hypot(*z)), math.atan2(z[1], z[0])
-            other = 1 - i
-            rr, rb = reading(truth[other])
-            lm = (np.array([10]), *map(np.array, zip(reading(LANDMARKS[0])))) if rid == 1 and k % 20 == 0 \
-                else (np.zeros(0, np.int64), np.zeros(0), np.zeros(0))
+            setup = bots[rid].setup
+            rr, rb = _reading(rng, setup, truth[i], headings[i], truth[1 - i])
+            lm = (np.array([10]), *map(np.array, zip(_reading(rng, setup, truth[i], headings[i], LANDMARKS[0])))) \
+                if rid == 1 and k % 20 == 0 else (np.zeros(0, np.int64), np.zeros(0), np.zeros(0))
             obs = LandmarkObservation(
                 robot_id=rid, tick=k, time_s=(k + 1) * dt, odometry_v_mps=0.1, odometry_omega_rad_s=0.0,
                 odometry_dt_s=dt, landmark_ids=lm[0], landmark_range_m=lm[1], landmark_bearing_rad=lm[2],

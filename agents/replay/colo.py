@@ -889,5 +889,15 @@ def build_gs_sci(setup, rng, params):
     return GlobalStateLocalizer(setup, _params(params), rng, split=True)
 
 
-__all__ = ["COLO_ALGORITHMS", "ColoParams", "Joint", "NOISE_MODELS", "bda_update", "ci_fuse",
-           "ekf_update", "observed_fix", "propagate_robot", "relative_model"]
+__all__ = [
+    "COLO_ALGORITHMS",
+    "NOISE_MODELS",
+    "ColoParams",
+    "Joint",
+    "bda_update",
+    "ci_fuse",
+    "ekf_update",
+    "observed_fix",
+    "propagate_robot",
+    "relative_model",
+]

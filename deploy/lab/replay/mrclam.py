@@ -44,6 +44,7 @@ from swarmloc.agents.replay.calibration import (
     SelfCalibrationParams,
     robust_std,
 )
+from swarmloc.agents.replay.colo import COLO_ALGORITHMS
 from swarmloc.agents.replay.localizers import (
     ALGORITHMS,
     CameraNoise,
@@ -52,7 +53,6 @@ from swarmloc.agents.replay.localizers import (
     build_localizer,
     wrap_angle,
 )
-from swarmloc.agents.replay.colo import COLO_ALGORITHMS
 from swarmloc.world.replay.mrclam import MrclamDataset, load_dataset
 from swarmloc.world.replay.replay import DEFAULT_DT_S, ReplayWorld
 
@@ -290,7 +290,7 @@ def parse_links(links) -> dict[int, tuple[int, ...]]:
             pairs[receiver] = senders.split(",") if senders else []
         links = pairs
     if not isinstance(links, Mapping):
-        raise ValueError(f"links: expected a mapping receiver -> list of senders, got {links!r}")
+        raise ValueError(f"links: expected a mapping receiver -> list of senders, got {links!r}")  # noqa: TRY004
     out = {}
     for receiver, senders in links.items():
         try:
