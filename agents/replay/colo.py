@@ -143,7 +143,9 @@ class ColoParams:
     #: Covariance intersection weight: 0 chooses it to minimise the fused trace (Julier and
     #: Uhlmann); a value in (0, 1) fixes it (CoLo-AT: 0.5 for LS-CI, 0.8 for GS-CI and GS-SCI).
     ci_weight: float = 0.0
-    #: A teammate's motion where its odometry is not known: a random walk of this speed std.
+    #: A teammate's motion where its odometry is not known (GS's teammates, a replica's missing
+    #: payload): a random walk whose variance grows by ``std^2 * 1 s`` per second
+    #: (:func:`random_walk`), position and heading.
     teammate_speed_std_mps: float = 0.1
     teammate_turn_std_rad_s: float = 0.3
     gate_chi2: float = CHI2_2DOF_999
