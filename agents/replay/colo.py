@@ -356,12 +356,46 @@ def _wrap_headings(joint: Joint) -> None:
         joint.x[2::3] = wrap_angle(joint.x[2::3])
 
 
-def ekf_update(joint: Joint, h: np.ndarray, nu: np.ndarray, r: np.ndarray, gate_chi2: float) -> bool:
+#: chi-square 95 % quantile, 2 degrees of freedom (a reading's NIS band).
+CHI2_2DOF_95 = 5.991464547107979
+
+
+@dataclass
+class NisTally:
+    """The normalized innovation squared ``nu^T S^-1 nu`` of a kind of update (2 degrees of
+    freedom: 2 on average for a consistent filter, inside :data:`CHI2_2DOF_95` 95 % of the time;
+    for a CI fusion, of the fix against ``P + R``, which assumes no correlation), every reading
+    counted, gated out or not."""
+
+    count: int = 0
+    total: float = 0.0
+    inside_95: int = 0
+
+    def add(self, value: float) -> None:
+        self.count += 1
+        self.total += value
+        self.inside_95 += int(value <= CHI2_2DOF_95)
+
+    def scores(self, kind: str) -> dict[str, float]:
+        n = self.count
+        return {f"{kind}_nis_mean": self.total / n if n else math.nan,
+                f"{kind}_nis_in_95": self.inside_95 / n if n else math.nan,
+                f"{kind}_nis_count": float(n)}
+
+
+def _gated(d2: float, gate_chi2: float, nis: NisTally | None) -> bool:
+    if nis is not None:
+        nis.add(d2)
+    return d2 >= gate_chi2
+
+
+def ekf_update(joint: Joint, h: np.ndarray, nu: np.ndarray, r: np.ndarray, gate_chi2: float,
+               nis: NisTally | None = None) -> bool:
     """The EKF update of the whole stacked state (Joseph form; ``Pi`` too, for split CI).
     Returns whether the reading passed the gate."""
     pht = joint.P @ h.T
     s = h @ pht + r
-    if float(nu @ np.linalg.solve(s, nu)) >= gate_chi2:
+    if _gated(float(nu @ np.linalg.solve(s, nu)), gate_chi2, nis):
         return False
     k = np.linalg.solve(s, pht.T).T
     joint.x += k @ nu
@@ -377,7 +411,7 @@ def ekf_update(joint: Joint, h: np.ndarray, nu: np.ndarray, r: np.ndarray, gate_
 
 
 def bda_update(joint: Joint, robots: list[int], h: np.ndarray, nu: np.ndarray, r: np.ndarray,
-               gate_chi2: float) -> bool:
+               gate_chi2: float, nis: NisTally | None = None) -> bool:
     """Luft et al.'s block-diagonal approximation: the EKF on the joint block of ``robots`` (one
     for a landmark reading, two for a relative one); every cross-covariance of an updated robot
     ``a`` with a robot ``k`` outside is multiplied by ``Sigma_aa^+ (Sigma_aa^-)^-1``; the robots
@@ -387,7 +421,7 @@ def bda_update(joint: Joint, robots: list[int], h: np.ndarray, nu: np.ndarray, r
     hs = h[:, idx]
     ps = joint.P[np.ix_(idx, idx)]
     s = hs @ ps @ hs.T + r
-    if float(nu @ np.linalg.solve(s, nu)) >= gate_chi2:
+    if _gated(float(nu @ np.linalg.solve(s, nu)), gate_chi2, nis):
         return False
     k = np.linalg.solve(s, hs @ ps).T
     joint.x[idx] += k @ nu
@@ -425,7 +459,8 @@ def ci_weight_for(trace_of, fixed: float) -> float:
 
 
 def ci_fuse(joint: Joint, idx: np.ndarray, z: np.ndarray, z_cov: np.ndarray, weight: float,
-            gate_chi2: float = math.inf, z_cov_i: np.ndarray | None = None) -> float | None:
+            gate_chi2: float = math.inf, z_cov_i: np.ndarray | None = None,
+            nis: NisTally | None = None) -> float | None:
     """Fuse an estimate ``z`` (covariance ``z_cov``) of the state entries ``idx``, of unknown
     correlation with them, by covariance intersection (Julier and Uhlmann; split CI of Li and
     Nashashibi when the joint keeps ``Pi`` and ``z_cov_i`` is the estimate's independent part).
@@ -437,7 +472,7 @@ def ci_fuse(joint: Joint, idx: np.ndarray, z: np.ndarray, z_cov: np.ndarray, wei
     if joint.d == 3:  # headings among the entries: the innovation's angles wrapped
         heads = (idx % 3) == 2
         nu[heads] = wrap_angle(nu[heads])
-    if float(nu @ np.linalg.solve(p_oo + z_cov, nu)) >= gate_chi2:
+    if _gated(float(nu @ np.linalg.solve(p_oo + z_cov, nu)), gate_chi2, nis):
         return None
     split = joint.Pi is not None and z_cov_i is not None
     if split:
@@ -593,6 +628,9 @@ class _ColoBase:
         self.joint: Joint | None = None  # made at the first step, when the heading mode is known
         self.rejected: tuple[tuple[int, ValueError], ...] = ()
         self.landmark_updates = self.teammate_updates = self.fusions = 0
+        #: NIS of this robot's own landmark readings and of its teammate updates (relative
+        #: readings, CI fixes), see :class:`NisTally` and :meth:`nis_scores`.
+        self.nis = {"landmark": NisTally(), "teammate": NisTally()}
         self._out: bytes | None = None
         self._view: Joint | None = None
 
@@ -603,9 +641,15 @@ class _ColoBase:
         joint.add(self.setup.robot_id, self.setup.initial_pose.copy(), self.setup.initial_covariance())
         return joint
 
-    def _landmarks(self, joint: Joint, k: int, lm: np.ndarray, bda: bool = False) -> None:
+    def nis_scores(self) -> dict[str, float]:
+        """Mean NIS, share inside the 95 % band and count, of landmark and teammate updates."""
+        return {**self.nis["landmark"].scores("landmark"), **self.nis["teammate"].scores("teammate")}
+
+    def _landmarks(self, joint: Joint, k: int, lm: np.ndarray, bda: bool = False,
+                   tally: bool = True) -> None:
         if not lm.shape[0]:
             return
+        nis = self.nis["landmark"] if tally else None
         xy, known = self.setup.landmark_positions(lm[:, 0].astype(np.int64))
         for (_, r, b), p, ok in zip(lm, xy, known):
             if not ok:
@@ -614,12 +658,14 @@ class _ColoBase:
             nu = r * np.array([math.cos(b), math.sin(b)]) - z_hat
             noise = reading_noise(self.setup, self.params.noise_model, r, b) * self.params.reading_noise_scale
             if bda:
-                accepted = bda_update(joint, [k], h, nu, noise, self.params.gate_chi2)
+                accepted = bda_update(joint, [k], h, nu, noise, self.params.gate_chi2, nis)
             else:
-                accepted = ekf_update(joint, h, nu, noise, self.params.gate_chi2)
+                accepted = ekf_update(joint, h, nu, noise, self.params.gate_chi2, nis)
             self.landmark_updates += int(accepted)
 
-    def _relative(self, joint: Joint, k: int, rows: np.ndarray, bda: bool = False) -> None:
+    def _relative(self, joint: Joint, k: int, rows: np.ndarray, bda: bool = False,
+                  tally: bool = True) -> None:
+        nis = self.nis["teammate"] if tally else None
         for rid, r, b in rows:
             j = joint.index(int(rid))
             if j is None or j == k:
@@ -628,9 +674,9 @@ class _ColoBase:
             nu = r * np.array([math.cos(b), math.sin(b)]) - z_hat
             noise = reading_noise(self.setup, self.params.noise_model, r, b) * self.params.reading_noise_scale
             if bda:
-                accepted = bda_update(joint, [k, j], h, nu, noise, self.params.gate_chi2)
+                accepted = bda_update(joint, [k, j], h, nu, noise, self.params.gate_chi2, nis)
             else:
-                accepted = ekf_update(joint, h, nu, noise, self.params.gate_chi2)
+                accepted = ekf_update(joint, h, nu, noise, self.params.gate_chi2, nis)
             self.teammate_updates += int(accepted)
 
     def _own(self) -> int:
@@ -707,9 +753,12 @@ class ReplicaLocalizer(_ColoBase):
         k = view.index(self.setup.robot_id)
         propagate_robot(view, k, self.setup, p.noise_model, own.v_mps, own.omega_rad_s, own.dt_s,
                         own.true_heading_rad, p.motion_noise_scale)
-        self._landmarks(view, k, own.landmarks, self.bda)
+        # Cooperative, this robot's readings are counted in the NIS when they are committed
+        # (next tick); alone, the view is the filter.
+        alone = not self.setup.cooperative
+        self._landmarks(view, k, own.landmarks, self.bda, tally=alone)
         if self.setup.cooperative:
-            self._relative(view, k, own.robots, self.bda)
+            self._relative(view, k, own.robots, self.bda, tally=False)
         self._view = view
         if self.setup.cooperative:
             self._report(obs, encode_extra(events=own))
@@ -726,11 +775,12 @@ class ReplicaLocalizer(_ColoBase):
             propagate_robot(joint, k, self.setup, p.noise_model, ev.v_mps, ev.omega_rad_s, ev.dt_s,
                             ev.true_heading_rad, p.motion_noise_scale)
         for rid in sorted(events):
-            self._landmarks(joint, joint.index(rid), events[rid].landmarks, self.bda)
+            self._landmarks(joint, joint.index(rid), events[rid].landmarks, self.bda,
+                            tally=rid == self.setup.robot_id)
         for rid in sorted(events):
             rows = events[rid].robots
             rows = rows[[r in events for r in rows[:, 0].astype(int).tolist()]] if rows.size else rows
-            self._relative(joint, joint.index(rid), rows, self.bda)
+            self._relative(joint, joint.index(rid), rows, self.bda, tally=rid == self.setup.robot_id)
 
 
 class LsCiLocalizer(_ColoBase):
@@ -757,7 +807,8 @@ class LsCiLocalizer(_ColoBase):
             _, r, b = mine[0]
             fix, fix_cov = observed_fix(rep.pose, rep.covariance, r, b,
                                         reading_noise(self.setup, p.noise_model, r, b) * p.reading_noise_scale, joint.d)
-            w = ci_fuse(joint, np.arange(2), fix, fix_cov, p.ci_weight, p.gate_chi2)
+            w = ci_fuse(joint, np.arange(2), fix, fix_cov, p.ci_weight, p.gate_chi2,
+                        nis=self.nis["teammate"])
             self.fusions += int(w is not None)
         self._report(obs, b"")
 

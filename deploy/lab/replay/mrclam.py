@@ -194,6 +194,9 @@ class ReplayResult:
     #: (T, N, 2, 2) each estimate's position covariance, NaN where the localizer gives none
     #: (``covariance_xy()``: the EKFs; issue 46's consistency).
     covariance_xy: np.ndarray | None = None
+    #: Per robot, the NIS of its landmark and teammate updates, for localizers that count it
+    #: (``nis_scores()``: CoLo's estimators, ``agents/replay/colo.py``); empty otherwise.
+    nis: Mapping[int, Mapping[str, float]] = field(default_factory=dict)
 
     def position_error_m(self) -> np.ndarray:
         """(T, N) distance between estimate and truth (NaN where no truth)."""
@@ -354,8 +357,13 @@ def run_replay(dataset: MrclamDataset, config: ReplayConfig) -> ReplayResult:
             rejected += len(getattr(brain, "rejected", ()))
         world.step(outgoing)
     cpu = time.process_time() - t0
+    nis = {}
+    for rid, brain in brains.items():
+        nis_scores = getattr(getattr(brain, "inner", brain), "nis_scores", None)
+        if nis_scores is not None:
+            nis[rid] = nis_scores()
     return ReplayResult(config, world.robot_ids, world.tick_end_times_s.copy(), estimates,
-                        world.ground_truth(), cpu, rejected, world.kidnap_tick, covariance)
+                        world.ground_truth(), cpu, rejected, world.kidnap_tick, covariance, nis)
 
 
 def rmse_at_truth_stamps(result: ReplayResult, dataset: MrclamDataset) -> dict[int, float]:
@@ -589,6 +597,12 @@ def print_scores(result: ReplayResult, scores: dict[int, dict[str, float]], name
     if any(np.isfinite(v[0]) for v in nees.values()):
         print("consistency, position NEES mean (2 if consistent) / share within chi2 95 % (0.95): "
               + ", ".join(f"{rid} {m:.1f} / {f:.2f}" for rid, (m, f) in nees.items()))
+    for kind in ("landmark", "teammate"):
+        if result.nis and any(s.get(f"{kind}_nis_count") for s in result.nis.values()):
+            print(f"NIS of the {kind} updates, mean (2 if consistent) / share within chi2 95 % "
+                  "(0.95): " + ", ".join(
+                      f"{rid} {s[f'{kind}_nis_mean']:.1f} / {s[f'{kind}_nis_in_95']:.2f}"
+                      for rid, s in result.nis.items()))
 
 
 # --------------------------------------------------------------------------------------------
