@@ -344,3 +344,18 @@ def test_tum_files_read_back_by_evo_and_ape_by_hand(blind, tmp_path):
     errors = trajectory_errors(pair)[1]
     assert errors["ape_rmse_m"] == pytest.approx(0.5, abs=1e-9)
     assert errors["rpe_rmse_m"] == pytest.approx(0.0, abs=1e-9)
+
+
+def test_the_replay_report_refuses_rows_it_cannot_tell_apart(tmp_path):
+    # Two settings of the same algorithm that differ by a parameter (CoLo-AT's noise models):
+    # the replay report's configuration key cannot hold both, so it says so instead of keeping one.
+    from swarmloc.config import ConfigError
+    from swarmloc.deploy.lab.replay.report import write_report
+
+    base = {"dataset": "D", "algorithm": "ls-cen", "cooperative": True, "calibration": "none",
+            "start": "known", "kidnap_s": None, "seed": 0, "dt_s": 0.02, "robot": 1,
+            "position_rmse_m": 0.3, "heading_rmse_rad": 0.0}
+    rows = [{**base, "setting": "a"}, {**base, "setting": "b", "position_rmse_m": 0.2}]
+    with pytest.raises(ConfigError, match="generic"):
+        write_report(rows, tmp_path)
+    write_report(rows[:1], tmp_path)  # one of them alone is a report

@@ -197,6 +197,14 @@ def write_report(rows: list[dict], out_dir: str | Path, replay_first=None,
     ordered, tracking, global_groups, kidnap_groups = [], [], {}, {}
     for key in configs:
         mine = sorted((r for r in rows if _key(r) == key), key=lambda r: (r["seed"], r["robot"]))
+        settings = sorted({r.get("setting") for r in mine} - {None})
+        if len({(r["seed"], r["robot"]) for r in mine}) < len(mine):
+            # This template tells configurations apart by algorithm, cooperation, calibration,
+            # start and kidnap; rows that differ otherwise (a parameter, CoLo-AT's setting)
+            # would overwrite each other.
+            raise ConfigError(f"settings {', '.join(map(str, settings))} share the configuration "
+                              f"{_label(key)!r} and a seed: this report cannot tell them apart; "
+                              "use `swarmloc report ... --family generic`")
         ordered += mine
         seeds = sorted({r["seed"] for r in mine})
         by_seed = {s: {r["robot"]: r for r in mine if r["seed"] == s} for s in seeds}
