@@ -96,7 +96,12 @@ Measurements are the relative position in the observer's frame, ``R = Rot(b) dia
 var_across) Rot(b)^T`` (CoLo-AT's form; the first-order form of the range-bearing noise).
 
 Readings are gated by the innovation's Mahalanobis distance (``gate_chi2``, chi-square 2 d.o.f.
-99.9 %, as the ``ekf``; CoLo-AT has no gate: ``gate_chi2 = 1e9`` turns it off).
+99.9 %, as the ``ekf``; CoLo-AT has no gate: ``gate_chi2 = 1e9`` turns it off). Every estimator
+counts the NIS of its robot's own landmark and teammate updates (:class:`NisTally`,
+``nis_scores()``), and ``motion_noise_scale`` / ``reading_noise_scale`` multiply the noise
+models' covariances: on MRCLAM, whose odometry is the command and whose errors are systematic,
+every filter here is overconfident as it stands (``docs/mrclam/colo.md``: LS-Cen is consistent
+with both times 6 and the gate divided by 6).
 
 Pure: no clock, no randomness (the generator is accepted for the common builder signature).
 """
@@ -727,7 +732,6 @@ class ReplicaLocalizer(_ColoBase):
         own = TickEvents.of(obs)
         if self.setup.cooperative:
             events: dict[int, TickEvents] = {}
-            new: set[int] = set()
             for rid, rep in self._decode(obs).items():
                 try:
                     ev, _ = decode_extra(rep, joint.d)
@@ -740,8 +744,7 @@ class ReplicaLocalizer(_ColoBase):
                     if len(joint.ids) >= _MAX_TEAM:
                         continue
                     joint.add(rid, rep.pose, rep.covariance)
-                    new.add(rid)
-                    continue
+                    continue  # its events count from the next tick on
                 events[rid] = ev
             if self._pending is not None:
                 events[self.setup.robot_id] = self._pending
