@@ -106,6 +106,9 @@ class ReplaySense:
     robots: tuple[LandmarkMsg, ...]  #: at most 64 measurements of teammates (id = robot id)
     received: tuple[RadioMsg, ...]  #: at most 64 teammates' broadcasts of the previous tick
     final: bool = False  #: the run is over
+    #: the robot's true heading at the tick's end, when the replay gives it (CoLo-AT's setting,
+    #: ``heading = "truth"``): one angle in [-pi, pi], else empty
+    true_heading_rad: tuple[float, ...] = ()
 
 
 @dataclass(frozen=True, slots=True)

@@ -608,6 +608,7 @@ _FIELD_SPECS: dict[type, tuple[str, dict[str, _Spec]]] = {
         "robots": _Tuple(_Message(LandmarkMsg), MAX_TEAMMATES),
         "received": _Tuple(_Message(RadioMsg), MAX_TEAMMATES),
         "final": _Bool(),
+        "true_heading_rad": _Tuple(_BEARING, 1),
     }),
     EstimateAct: ("estimate_act", {
         "tick": _TICK,

@@ -26,17 +26,22 @@ DATASET = Path(__file__).resolve().parents[2] / "shared" / "data" / "mrclam" / "
 
 
 @pytest.mark.skipif(not DATASET.is_dir(), reason=f"MRCLAM Dataset 6 not found at {DATASET}")
-@pytest.mark.parametrize("algorithm, start, duration_s", [
-    ("ekf", "known", 10.0), ("pf", "known", 10.0), ("hybrid", "unknown", 40.0),
-    ("ssga", "known", 10.0)])
+@pytest.mark.parametrize("algorithm, start, duration_s, setting", [
+    ("ekf", "known", 10.0, []), ("pf", "known", 10.0, []), ("hybrid", "unknown", 40.0, []),
+    ("ssga", "known", 10.0, []),
+    # CoLo's estimators (issue 46): the centralized filter's replicas, and the global state with
+    # split CI in CoLo-AT's setting (true heading over the wire, landmark robots, links)
+    ("ls-cen", "known", 10.0, []),
+    ("gs-sci", "known", 10.0, ['heading="truth"', "landmark_robots=[1, 2, 3]",
+                               'links={"1" = [2], "2" = [3]}'])])
 def test_replay_over_processes_gives_the_in_process_estimates(tmp_path, algorithm, start,
-                                                              duration_s):
+                                                              duration_s, setting):
     """The hybrid from an unknown start: the particle filter's search, the handover to the EKF
     and the cooperation of both stages, over processes (seed 1: in-process, the five robots of
     Dataset 6 are under 0.3 m for good by 15, 18, 16, 25 and 30 s)."""
     scenario = load_any("mrclam6-ekf-coop", {"seed": 1, "algorithm": algorithm},
                         [f"dataset={json.dumps(str(DATASET))}", f"duration_s={duration_s}",
-                         f"start={json.dumps(start)}"])
+                         f"start={json.dumps(start)}", *setting])
     path = tmp_path / "scenario.json"
     path.write_text(json.dumps(scenario.to_dict()))
     out = tmp_path / "out"

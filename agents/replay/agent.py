@@ -55,6 +55,7 @@ class ReplayAgent:
             landmark_bearing_rad=lm_bearing, robot_ids=r_ids, robot_range_m=r_range,
             robot_bearing_rad=r_bearing,
             received=tuple(Message(m.sender_id, m.payload) for m in sense.received),
+            true_heading_rad=sense.true_heading_rad[0] if sense.true_heading_rad else None,
         )
         self.localizer.step(obs)
         for sender, exc in getattr(self.localizer, "rejected", ()):

@@ -81,7 +81,9 @@ State: the pose ``(x_m, y_m, theta_rad)`` and its covariance ``P`` (3 x 3).
   ``fusion="sgikf"`` the reading becomes a position fix
   fused by social odometry's SGIKF (seed 000 eq. 18-22,
   :func:`~swarmloc.agents.replay.localizers.sgikf_fuse`). With ``fusion="ci"`` (the algorithm
-  ``ekf-ci``: CoLo-AT's local-state covariance intersection, LS-CI, issue 46) the teammate's
+  ``ekf-ci``: a covariance-intersection version of this cooperative EKF, after CoLo-AT's
+  local-state covariance intersection, issue 46; the paper's LS-CI itself is ``ls-ci``,
+  :mod:`swarmloc.agents.replay.colo`) the teammate's
   estimate and the reading give a fix of this robot's position, fused by covariance
   intersection instead of a Kalman update: correct whatever the unknown correlation between the
   two estimates (S. J. Julier and J. K. Uhlmann, "A non-divergent estimation algorithm in the

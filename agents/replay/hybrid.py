@@ -401,5 +401,11 @@ class HybridLocalizer:
     def covariance(self) -> np.ndarray:
         return self.active.covariance
 
+    def covariance_xy(self) -> np.ndarray | None:
+        """The tracking EKF's position covariance while it tracks (what the consistency scores
+        read, issue 46); None while the particle filter searches (its belief is not one
+        Gaussian)."""
+        return None if self.phase == SEARCH or self.ekf is None else self.ekf.covariance_xy()
+
     def outgoing(self) -> bytes | None:
         return self._out

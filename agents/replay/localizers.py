@@ -41,6 +41,10 @@ Algorithms (registry :data:`ALGORITHMS`, built by :func:`build_localizer`):
   fitness terms over the readings of the last two seconds; cooperative: eq. 2, the teammates'
   relative readings against their broadcast beliefs added to the fitness
   (:mod:`swarmloc.agents.replay.ssga_landmarks`).
+- ``ls-cen``, ``ls-bda``, ``ls-ci``, ``gs-ci``, ``gs-sci``: CoLo-AT's cooperative-localization
+  estimators (centralized EKF as a replica in every robot, block-diagonal approximation,
+  local-state and global-state covariance intersection, split CI), each from its paper
+  (:mod:`swarmloc.agents.replay.colo`, issue 46).
 
 Particle filter and GA run their measurement step (correction/generation) on the ticks that
 bring a landmark or teammate measurement and only move their hypotheses with the odometry in
@@ -473,6 +477,10 @@ class TeammateReport:
     seen: np.ndarray  #: (M, 3)
     samples: np.ndarray  #: (Q, 3), Q may be 0
     camera_bias: tuple[float, float, int] | None = None
+    #: An algorithm's own further data (CoLo's estimators, :mod:`swarmloc.agents.replay.colo`:
+    #: the tick's odometry and readings, a global state); on the wire only when not empty, under
+    #: the optional key ``extra`` (bin), decoded by the algorithm that reads it.
+    extra: bytes = b""
 
     def encode(self) -> bytes:
         state = np.concatenate([self.pose, self.covariance[_UPPER]]).astype("<f8")
@@ -483,6 +491,8 @@ class TeammateReport:
             "samples": np.ascontiguousarray(self.samples, dtype="<f4").tobytes(),
             "camera": encode_camera_bias(self.camera_bias),
         }
+        if self.extra:
+            wire["extra"] = bytes(self.extra)
         data = msgpack.packb(wire, use_bin_type=True)
         if len(data) > MAX_PAYLOAD_BYTES:
             raise ValueError(f"report of {len(data)} bytes exceeds {MAX_PAYLOAD_BYTES}")
@@ -490,14 +500,14 @@ class TeammateReport:
 
     @classmethod
     def build(cls, robot_id: int, tick: int, pose, covariance, obs: LandmarkObservation | None,
-              samples: np.ndarray | None = None) -> TeammateReport:
+              samples: np.ndarray | None = None, extra: bytes = b"") -> TeammateReport:
         if obs is not None and obs.robot_ids.size:
             seen = np.column_stack([obs.robot_ids, obs.robot_range_m, obs.robot_bearing_rad])
             seen = seen[:MAX_REPORT_SIGHTINGS]
         else:
             seen = _NO_ROWS
         samples = _NO_ROWS if samples is None else np.asarray(samples)[:MAX_REPORT_SAMPLES]
-        return cls(int(robot_id), int(tick), pose, covariance, seen, samples)
+        return cls(int(robot_id), int(tick), pose, covariance, seen, samples, extra=extra)
 
 
 _NO_ROWS = np.zeros((0, 3))
@@ -574,8 +584,8 @@ def _unpack_report(payload: bytes) -> dict:
         raise ValueError(f"payload: not a teammate report ({type(exc).__name__})") from None
     if not isinstance(wire, dict):
         raise ValueError(f"payload: expected a map, got {type(wire).__name__}")  # noqa: TRY004
-    if wire.keys() != _REPORT_KEYS:
-        missing, extra = _REPORT_KEYS - wire.keys(), wire.keys() - _REPORT_KEYS
+    if wire.keys() != _REPORT_KEYS and wire.keys() != _REPORT_KEYS | {"extra"}:
+        missing, extra = _REPORT_KEYS - wire.keys(), wire.keys() - _REPORT_KEYS - {"extra"}
         raise ValueError(f"payload: missing field(s) {sorted(missing)}, "
                          f"unknown field(s) {sorted(map(str, extra))}")
     if wire["t"] != REPORT_TYPE:
@@ -583,6 +593,9 @@ def _unpack_report(payload: bytes) -> dict:
     if type(wire["v"]) is not int or wire["v"] != REPORT_VERSION:
         raise ValueError(f"payload.v: expected {REPORT_VERSION}, got {wire['v']!r}")
     wire["camera"] = _camera_bias(wire["camera"])  # small: checked for every payload
+    extra = wire.setdefault("extra", b"")
+    if not isinstance(extra, bytes):
+        raise ValueError(f"payload.extra: expected bytes, got {type(extra).__name__}")  # noqa: TRY004
     return wire
 
 
@@ -614,7 +627,8 @@ def _report_from_wire(wire: dict) -> TeammateReport:
     samples = _rows(wire["samples"], "samples", "<f4", MAX_REPORT_SAMPLES)
     if samples.shape[0] and (np.abs(samples[:, :2]) > _MAX_COORDINATE_M).any():
         raise ValueError("payload.samples: positions must lie within 1e5 m")
-    return TeammateReport(wire["id"], wire["tick"], pose, cov, seen, samples, wire["camera"])
+    return TeammateReport(wire["id"], wire["tick"], pose, cov, seen, samples, wire["camera"],
+                          wire["extra"])
 
 
 def decode_received(received: Sequence[Message], robot_id: int,
@@ -893,7 +907,7 @@ def _build_ekf_ci(setup, rng, params):
     return EkfLocalizer(setup, params_from_dict(EkfParams, {"fusion": "ci", **params}, "ekf-ci"), rng)
 
 
-register(Algorithm("ekf-ci", "EKF with known landmarks; cooperative: covariance intersection (CoLo's LS-CI)",
+register(Algorithm("ekf-ci", "EKF with known landmarks; cooperative: covariance intersection of position fixes (after CoLo's LS-CI; the paper's is ls-ci)",
                    _build_ekf_ci))
 register(Algorithm("pf", "AMCL-style particle filter; cooperative: teammates' beliefs", _build_pf))
 register(Algorithm("cfsga", "CFS-GA; cooperative: virtual population", _build_cfsga))
@@ -917,3 +931,21 @@ def _build_ssga(setup, rng, params):
 
 register(Algorithm("ssga", "MR-SSGA (seed 002) on a small-world network; cooperative: teammates' "
                    "readings in the fitness", _build_ssga))
+
+
+def _build_colo(name: str) -> Builder:
+    def build(setup, rng, params):
+        from swarmloc.agents.replay import colo
+
+        return getattr(colo, "build_" + name.replace("-", "_"))(setup, rng, params)
+
+    return build
+
+
+for _name, _description in (
+        ("ls-cen", "CoLo's LS-Cen: centralized EKF (Roumeliotis and Bekey 2002), a replica in every robot"),
+        ("ls-bda", "CoLo's LS-BDA: block-diagonal approximation (Luft et al. 2018), a replica in every robot"),
+        ("ls-ci", "CoLo's LS-CI: local-state covariance intersection (Carrillo-Arce et al. 2013)"),
+        ("gs-ci", "CoLo's GS-CI: global-state covariance intersection (Chang, Chen and Mehta 2017)"),
+        ("gs-sci", "CoLo's GS-SCI: global-state split covariance intersection (Li and Nashashibi 2013)")):
+    register(Algorithm(_name, _description, _build_colo(_name)))

@@ -80,6 +80,10 @@ class LandmarkObservation:
     robot_range_m: np.ndarray  #: (M,)
     robot_bearing_rad: np.ndarray  #: (M,)
     received: tuple[Message, ...] = ()
+    #: The robot's true heading at the tick's end from the ground truth, given only when the
+    #: replay is told to (``ReplayWorld(true_heading=True)``: CoLo-AT's setting, issue 46);
+    #: None otherwise. Where the ground truth has a gap or has ended, the last known heading.
+    true_heading_rad: float | None = None
 
 
 def _check_positive(value, name: str) -> float:
@@ -139,7 +143,14 @@ class ReplayWorld:
     def __init__(self, dataset: MrclamDataset, dt_s: float = DEFAULT_DT_S, *,
                  start_s: float | None = None, end_s: float | None = None,
                  odometry_hold_s: float = DEFAULT_ODOMETRY_HOLD_S,
-                 kidnap: tuple[int, float, tuple[float, float]] | None = None):
+                 kidnap: tuple[int, float, tuple[float, float]] | None = None,
+                 true_heading: bool = False,
+                 landmark_robots: tuple[int, ...] | None = None,
+                 links: Mapping[int, tuple[int, ...]] | None = None):
+        """``true_heading``: every observation carries the robot's true heading (CoLo-AT's
+        setting); ``landmark_robots``: only these robots get their landmark readings (None:
+        every robot); ``links``: receiver id -> the sender ids it hears (None: everyone hears
+        everyone; a robot not listed hears nobody)."""
         self.dataset = dataset
         self.dt_s = _check_positive(dt_s, "dt_s")
         hold = _check_positive(odometry_hold_s, "odometry_hold_s")
@@ -168,6 +179,27 @@ class ReplayWorld:
         self.kidnap_tick: tuple[int, int] | None = None
         if kidnap is not None:
             self._kidnap(*kidnap)
+        for name, ids in (("landmark_robots", landmark_robots or ()),
+                          ("links", [*(links or {}), *(j for v in (links or {}).values() for j in v)])):
+            for rid in ids:
+                if rid not in self.robot_ids:
+                    raise ValueError(f"{name}: no robot {rid!r} in {dataset.name} "
+                                     f"(robots {', '.join(map(str, self.robot_ids))})")
+        self.landmark_robots = None if landmark_robots is None else tuple(landmark_robots)
+        self.links = None if links is None else {int(k): tuple(v) for k, v in links.items()}
+        self._true_heading: list[list[float]] | None = None
+        if true_heading:
+            self._true_heading = []
+            for rid in self.robot_ids:
+                theta = dataset.robots[rid].pose_at(self.boundaries_s[1:], max_gap_s=np.inf)[:, 2]
+                known = np.flatnonzero(np.isfinite(theta))
+                if not known.size:
+                    raise ValueError(f"true_heading: robot {rid} has no ground truth in the replay")
+                # the last known heading across a gap or after the log's end (the first known
+                # one before it starts)
+                fill = known[np.clip(np.searchsorted(known, np.arange(theta.size), "right") - 1,
+                                     0, None)]
+                self._true_heading.append(theta[fill].tolist())
         self.tick = 0
         self._inbox: dict[int, tuple[Message, ...]] = {rid: () for rid in self.robot_ids}
 
@@ -219,13 +251,16 @@ class ReplayWorld:
         out = []
         for i, rid in enumerate(self.robot_ids):
             lm_ids, lm_range, lm_bearing = self._landmarks[i].at(k)
+            if self.landmark_robots is not None and rid not in self.landmark_robots:
+                lm_ids, lm_range, lm_bearing = lm_ids[:0], lm_range[:0], lm_bearing[:0]
             r_ids, r_range, r_bearing = self._robots[i].at(k)
             out.append(LandmarkObservation(
                 robot_id=rid, tick=k, time_s=time_s, odometry_v_mps=self._v[i][k],
                 odometry_omega_rad_s=self._omega[i][k], odometry_dt_s=self.dt_s,
                 landmark_ids=lm_ids, landmark_range_m=lm_range, landmark_bearing_rad=lm_bearing,
                 robot_ids=r_ids, robot_range_m=r_range, robot_bearing_rad=r_bearing,
-                received=self._inbox[rid]))
+                received=self._inbox[rid],
+                true_heading_rad=None if self._true_heading is None else self._true_heading[i][k]))
         return out
 
     def step(self, outgoing: Mapping[int, bytes | None]) -> None:
@@ -247,6 +282,7 @@ class ReplayWorld:
                                  f"{MAX_PAYLOAD_BYTES}")
             messages.append(Message(int(rid), bytes(payload)))
         messages.sort(key=lambda m: m.sender_id)
-        self._inbox = {rid: tuple(m for m in messages if m.sender_id != rid)
+        self._inbox = {rid: tuple(m for m in messages if m.sender_id != rid and
+                                  (self.links is None or m.sender_id in self.links.get(rid, ())))
                        for rid in self.robot_ids}
         self.tick += 1

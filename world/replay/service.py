@@ -51,6 +51,12 @@ class ReplayScenario:
     kidnap_s: float | None = None
     kidnap_robot: int | None = None
     params: dict = field(default_factory=dict)
+    #: CoLo-AT's setting (issue 46): ``heading = "truth"``, ``landmark_robots = [1, 2, 3]``,
+    #: ``links = {"1" = [2], "2" = [3]}``, ``initial_std = [0.2, 0.2, 0.0]``.
+    heading: str = "estimate"
+    landmark_robots: list | None = None
+    links: dict | None = None
+    initial_std: list | None = None
 
     def __post_init__(self) -> None:
         if self.family != "replay":
@@ -67,7 +73,12 @@ class ReplayScenario:
                             dt_s=self.dt_s, params=dict(self.params), duration_s=self.duration_s,
                             calibration=self.calibration, calibration_s=self.calibration_s,
                             start=self.start, kidnap_s=self.kidnap_s,
-                            kidnap_robot=self.kidnap_robot)
+                            kidnap_robot=self.kidnap_robot, heading=self.heading,
+                            landmark_robots=None if self.landmark_robots is None
+                            else tuple(self.landmark_robots),
+                            links=self.links,
+                            **({} if self.initial_std is None
+                               else {"initial_std": tuple(self.initial_std)}))
 
     @functools.cached_property
     def world(self):  # what the process commands read: seed, robot count, ticks
@@ -157,6 +168,7 @@ class ReplayService(DrivenRobots):
                 robots=tuple(LandmarkMsg(int(a), float(r), float(b)) for a, r, b in zip(
                     obs.robot_ids.tolist(), obs.robot_range_m.tolist(), obs.robot_bearing_rad.tolist())),
                 received=tuple(RadioMsg(m.sender_id, m.payload) for m in obs.received),
+                true_heading_rad=() if obs.true_heading_rad is None else (float(obs.true_heading_rad),),
             )
             out.append((i, encode(sense)))
         return out

@@ -12,7 +12,8 @@ against the Vicon ground truth (:func:`~swarmloc.deploy.lab.replay.mrclam.score`
 (:func:`rows`, one per robot, written in one call) are the setting (experiment, group, setting,
 scenario, dataset, algorithm, cooperative, dt_s, seed, replication, one column per grid key), the
 robot and its scores (with the time until localized, the RMSE after and a kidnap's recovery
-time), cpu_s (the replay loop), wall_s and config_hash.
+time; the position NEES's mean and share inside the chi-square 95 % band and the mean trace of
+the position covariance, NaN for localizers without one, issue 46), cpu_s (the replay loop), wall_s and config_hash.
 
 The data set is not part of the repository: ``dataset`` is a folder (relative to the working
 directory), ``../shared/data/mrclam/MRCLAM_Dataset6`` in the shipped scenario and spec; elsewhere
@@ -37,13 +38,15 @@ SEED_KEY = "seed"
 LEAD_COLUMNS = ("experiment", "group", "setting", "scenario", "dataset", "algorithm",
                 "cooperative", "calibration", "start", "kidnap_s", "dt_s", "seed", "replication")
 METRIC_COLUMNS = ("robot", "position_rmse_m", "heading_rmse_rad", "final_error_m",
-                  "scored_ticks", "localized_s", "rmse_localized_m", "recovery_s", "cpu_s",
+                  "scored_ticks", "localized_s", "rmse_localized_m", "recovery_s",
+                  "position_nees_mean", "position_nees_in_95", "position_cov_trace_m2", "cpu_s",
                   "wall_s", "config_hash")
 #: What a job reports of its configuration (the lead columns it fills).
 _CONFIG_COLUMNS = ("dataset", "algorithm", "cooperative", "calibration", "start", "kidnap_s",
                    "dt_s")
 #: Relative CPU per tick of each localizer (the plan's progress weights; measured on Dataset 6).
-_COST = {"dr": 1, "ekf": 2, "pf": 6, "cfsga": 6, "ssga": 5, "hybrid": 4}
+_COST = {"dr": 1, "ekf": 2, "pf": 6, "cfsga": 6, "ssga": 5, "hybrid": 4, "ls-cen": 6,
+         "ls-bda": 6, "ls-ci": 2, "gs-ci": 6, "gs-sci": 6}
 
 
 def load_replay_scenario(name_or_path: str, overrides: list[str] = ()):
@@ -115,7 +118,7 @@ def _dataset(folder: str):
 
 def run_job(job: Job) -> dict:
     """One replay of a setting, scored per robot."""
-    from swarmloc.deploy.lab.replay.mrclam import run_replay, score
+    from swarmloc.deploy.lab.replay.mrclam import consistency, run_replay, score
 
     t0 = time.perf_counter()
     scenario = load_replay_scenario(job.scenario, list(job.overrides))
@@ -125,7 +128,8 @@ def run_job(job: Job) -> dict:
     return {"dataset": dataset.name, "algorithm": config.algorithm,
             "cooperative": config.cooperative, "calibration": config.calibration,
             "start": config.start, "kidnap_s": config.kidnap_s, "dt_s": config.dt_s,
-            "scores": {int(rid): sc for rid, sc in score(result).items()},
+            "scores": {int(rid): {**sc, **consistency(result)[rid]}
+                       for rid, sc in score(result).items()},
             "cpu_s": round(result.cpu_s, 1), "wall_s": round(time.perf_counter() - t0, 3)}
 
 

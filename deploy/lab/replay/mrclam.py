@@ -44,6 +44,7 @@ from swarmloc.agents.replay.calibration import (
     SelfCalibrationParams,
     robust_std,
 )
+from swarmloc.agents.replay.colo import COLO_ALGORITHMS
 from swarmloc.agents.replay.localizers import (
     ALGORITHMS,
     CameraNoise,
@@ -63,6 +64,9 @@ REPORT_ALGORITHMS = ("dr", "ekf", "pf", "cfsga", "ssga", "hybrid")
 CALIBRATIONS = ("self", "self-own", "vicon", "none")
 #: ``ReplayConfig.start``.
 STARTS = ("known", "unknown")
+#: ``ReplayConfig.heading``: estimated by the localizer, or the ground truth's given to it
+#: (CoLo-AT's setting; read by CoLo's estimators, ``agents/replay/colo.py``).
+HEADINGS = ("estimate", "truth")
 #: The localizers that can start from an unknown pose (a population over the whole field).
 GLOBAL_ALGORITHMS = ("pf", "cfsga", "ssga", "hybrid")
 #: A kidnap's jump told by the odometry: (distance m along the mid-turn heading, turn rad).
@@ -105,8 +109,30 @@ class ReplayConfig:
     #: teleported; the robot did not move). None: no kidnap.
     kidnap_s: float | None = None
     kidnap_robot: int | None = None
+    #: ``estimate`` (the localizer estimates it) or ``truth``: every observation carries the
+    #: robot's true heading (CoLo-AT's setting, issue 46), which CoLo's estimators use in
+    #: propagation and measurement models (the other localizers cannot: an error).
+    heading: str = "estimate"
+    #: The robots given their landmark readings (None: every robot; CoLo-AT's setting: 1, 2, 3).
+    landmark_robots: tuple[int, ...] | None = None
+    #: Who hears whom: receiver id -> the ids it hears (None: everyone hears everyone;
+    #: CoLo-AT's setting: ``{1: (2,), 2: (3,)}``, robots 3-5 hear nobody).
+    links: Mapping | None = None
 
     def __post_init__(self):
+        if self.heading not in HEADINGS:
+            raise ValueError(f"heading: unknown {self.heading!r} (known: {', '.join(HEADINGS)})")
+        if self.heading == "truth" and self.algorithm not in COLO_ALGORITHMS:
+            raise ValueError(f"heading: 'truth' is read by CoLo's estimators only "
+                             f"({', '.join(COLO_ALGORITHMS)}), not {self.algorithm!r}")
+        if self.landmark_robots is not None:
+            ids = self.landmark_robots
+            if isinstance(ids, (str, bytes)) or not isinstance(ids, (list, tuple)) or \
+                    not all(isinstance(r, int) and not isinstance(r, bool) for r in ids):
+                raise ValueError(f"landmark_robots: expected a list of robot ids, got {ids!r}")
+            object.__setattr__(self, "landmark_robots", tuple(ids))
+        if self.links is not None:
+            object.__setattr__(self, "links", parse_links(self.links))
         if self.algorithm not in ALGORITHMS:
             try:
                 ALGORITHMS.get(self.algorithm)  # the registry's message: closest name, plugins
@@ -149,6 +175,8 @@ class ReplayConfig:
             tags.append(f"{self.start}-start")
         if self.kidnap_s is not None:
             tags.append("kidnap")
+        if self.heading != "estimate":
+            tags.append(f"{self.heading}-heading")
         return " ".join(tags)
 
 
@@ -166,6 +194,9 @@ class ReplayResult:
     #: (T, N, 2, 2) each estimate's position covariance, NaN where the localizer gives none
     #: (``covariance_xy()``: the EKFs; issue 46's consistency).
     covariance_xy: np.ndarray | None = None
+    #: Per robot, the NIS of its landmark and teammate updates, for localizers that count it
+    #: (``nis_scores()``: CoLo's estimators, ``agents/replay/colo.py``); empty otherwise.
+    nis: Mapping[int, Mapping[str, float]] = field(default_factory=dict)
 
     def position_error_m(self) -> np.ndarray:
         """(T, N) distance between estimate and truth (NaN where no truth)."""
@@ -244,7 +275,36 @@ def replay_world(dataset: MrclamDataset, config: ReplayConfig) -> ReplayWorld:
             raise ValueError(f"kidnap_robot: {rid} is not a robot of {dataset.name} "
                              f"({', '.join(map(str, dataset.robot_ids))})")
         kidnap = (rid, dataset.time_span_s()[0] + config.kidnap_s, KIDNAP_JUMP)
-    return ReplayWorld(dataset, config.dt_s, end_s=end, kidnap=kidnap)
+    return ReplayWorld(dataset, config.dt_s, end_s=end, kidnap=kidnap,
+                       true_heading=config.heading == "truth",
+                       landmark_robots=config.landmark_robots, links=config.links)
+
+
+def parse_links(links) -> dict[int, tuple[int, ...]]:
+    """``links`` as ``{receiver: (senders...)}`` from a mapping (keys may be strings, as TOML
+    writes them) or a string ``"1:2 2:3"`` (receiver:sender,sender ...); ``ValueError`` naming
+    the key."""
+    if isinstance(links, str):
+        pairs = {}
+        for item in links.split():
+            receiver, sep, senders = item.partition(":")
+            if not sep:
+                raise ValueError(f"links: expected RECEIVER:SENDER[,SENDER] items, got {item!r}")
+            pairs[receiver] = senders.split(",") if senders else []
+        links = pairs
+    if not isinstance(links, Mapping):
+        raise ValueError(f"links: expected a mapping receiver -> list of senders, got {links!r}")  # noqa: TRY004
+    out = {}
+    for receiver, senders in links.items():
+        try:
+            key = int(receiver)
+            values = tuple(int(v) for v in (senders if isinstance(senders, (list, tuple)) else [senders]))
+        except (TypeError, ValueError):
+            raise ValueError(f"links: robot ids must be integers, got {receiver!r}: {senders!r}") from None
+        if isinstance(receiver, bool) or any(isinstance(v, bool) for v in values):
+            raise ValueError(f"links: robot ids must be integers, got {receiver!r}: {senders!r}")
+        out[key] = values
+    return out
 
 
 def replay_localizer(dataset: MrclamDataset, world: ReplayWorld, config: ReplayConfig, rid: int,
@@ -297,8 +357,90 @@ def run_replay(dataset: MrclamDataset, config: ReplayConfig) -> ReplayResult:
             rejected += len(getattr(brain, "rejected", ()))
         world.step(outgoing)
     cpu = time.process_time() - t0
+    nis = {}
+    for rid, brain in brains.items():
+        nis_scores = getattr(getattr(brain, "inner", brain), "nis_scores", None)
+        if nis_scores is not None:
+            nis[rid] = nis_scores()
     return ReplayResult(config, world.robot_ids, world.tick_end_times_s.copy(), estimates,
-                        world.ground_truth(), cpu, rejected, world.kidnap_tick, covariance)
+                        world.ground_truth(), cpu, rejected, world.kidnap_tick, covariance, nis)
+
+
+def rmse_at_truth_stamps(result: ReplayResult, dataset: MrclamDataset) -> dict[int, float]:
+    """Per robot, the position RMSE at every ground-truth stamp inside the replay (CoLo-AT's
+    metric, issue 46): the estimate at a stamp interpolated linearly between the ends of the
+    ticks around it (stamps before the first tick's end are left out)."""
+    out = {}
+    t = result.times_s
+    for i, rid in enumerate(result.robot_ids):
+        rec = dataset.robots[rid]
+        stamps = rec.groundtruth_time_s
+        sel = (stamps >= t[0]) & (stamps <= t[-1])
+        if not sel.any():
+            out[rid] = math.nan
+            continue
+        gt = rec.groundtruth_pose[sel]
+        ex = np.interp(stamps[sel], t, result.estimates[:, i, 0])
+        ey = np.interp(stamps[sel], t, result.estimates[:, i, 1])
+        out[rid] = float(np.sqrt(np.mean((ex - gt[:, 0]) ** 2 + (ey - gt[:, 1]) ** 2)))
+    return out
+
+
+def write_tum(result: ReplayResult, out_dir: Path) -> list[Path]:
+    """The estimated and the true trajectory of every robot in the TUM format that evo and
+    others read (``t x y z qx qy qz qw`` a line, ``z = 0``, the heading as a rotation about z):
+    ``estimate_R<id>.tum`` (every tick) and ``groundtruth_R<id>.tum`` (the ticks with ground
+    truth). Returns the paths."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for i, rid in enumerate(result.robot_ids):
+        for name, poses in (("estimate", result.estimates[:, i]), ("groundtruth", result.truth[:, i])):
+            ok = np.isfinite(poses).all(axis=1)
+            half = 0.5 * poses[ok, 2]
+            rows = np.column_stack([result.times_s[ok], poses[ok, 0], poses[ok, 1],
+                                    np.zeros(ok.sum()), np.zeros(ok.sum()), np.zeros(ok.sum()),
+                                    np.sin(half), np.cos(half)])
+            path = out / f"{name}_R{rid}.tum"
+            np.savetxt(path, rows, fmt="%.6f")
+            paths.append(path)
+    return paths
+
+
+def trajectory_errors(result: ReplayResult, rpe_delta_m: float = 1.0) -> dict[int, dict[str, float]]:
+    """Per robot, evo's absolute and relative trajectory error (translation part, no alignment:
+    the estimates are in the landmarks' frame): ``ape_rmse_m``, and ``rpe_rmse_m`` over pose
+    pairs ``rpe_delta_m`` of travel apart (evo's ``Unit.meters``), on the ticks with ground truth
+    (issue 46)."""
+    from evo.core import metrics
+    from evo.core.trajectory import PoseTrajectory3D
+
+    out = {}
+    for i, rid in enumerate(result.robot_ids):
+        ok = np.isfinite(result.truth[:, i]).all(axis=1)
+        if ok.sum() < 2:
+            out[rid] = {"ape_rmse_m": math.nan, "rpe_rmse_m": math.nan}
+            continue
+        trajectories = []
+        for poses in (result.truth[ok, i], result.estimates[ok, i]):
+            half = 0.5 * poses[:, 2]
+            quat = np.column_stack([np.cos(half), np.zeros(half.size), np.zeros(half.size),
+                                    np.sin(half)])
+            xyz = np.column_stack([poses[:, :2], np.zeros(half.size)])
+            trajectories.append(PoseTrajectory3D(positions_xyz=xyz, orientations_quat_wxyz=quat,
+                                                 timestamps=result.times_s[ok]))
+        ape = metrics.APE(metrics.PoseRelation.translation_part)
+        ape.process_data(tuple(trajectories))
+        rpe = metrics.RPE(metrics.PoseRelation.translation_part, delta=rpe_delta_m,
+                          delta_unit=metrics.Unit.meters, all_pairs=False)
+        try:
+            rpe.process_data(tuple(trajectories))
+            rpe_rmse = float(rpe.get_statistic(metrics.StatisticsType.rmse))
+        except Exception:  # noqa: BLE001 -- evo raises its own types when too short a path
+            rpe_rmse = math.nan
+        out[rid] = {"ape_rmse_m": float(ape.get_statistic(metrics.StatisticsType.rmse)),
+                    "rpe_rmse_m": rpe_rmse}
+    return out
 
 
 def localized_from(error_m: np.ndarray, threshold_m: float = LOCALIZED_M) -> int | None:
@@ -355,14 +497,19 @@ def consistency(result: ReplayResult) -> dict[int, dict[str, float]]:
     mean over scored ticks of the position's normalized estimation error squared ``e^T P^-1 e``
     (2 for a consistent filter; larger: overconfident), and ``position_nees_in_95``, the share of
     those ticks within the chi-square 95 % quantile for 2 degrees of freedom (0.95 if
-    consistent); NaN without a covariance. Apart from :func:`score`, whose figures the process
+    consistent), and ``position_cov_trace_m2``, the mean trace of the position covariance (what
+    CoLo-AT plots); NaN without a covariance. Apart from :func:`score`, whose figures the process
     path reproduces (an agent process reports its estimate, not its covariance)."""
     nees = position_nees(result)
     out = {}
     for i, rid in enumerate(result.robot_ids):
-        v = nees[np.isfinite(nees[:, i]), i]
+        ok = np.isfinite(nees[:, i])
+        v = nees[ok, i]
+        trace = (np.trace(result.covariance_xy[ok, i], axis1=-2, axis2=-1)
+                 if v.size and result.covariance_xy is not None else np.zeros(0))
         out[rid] = {"position_nees_mean": float(np.mean(v)) if v.size else math.nan,
-                    "position_nees_in_95": float(np.mean(v <= CHI2_2DOF_95)) if v.size else math.nan}
+                    "position_nees_in_95": float(np.mean(v <= CHI2_2DOF_95)) if v.size else math.nan,
+                    "position_cov_trace_m2": float(np.mean(trace)) if trace.size else math.nan}
     return out
 
 
@@ -450,6 +597,12 @@ def print_scores(result: ReplayResult, scores: dict[int, dict[str, float]], name
     if any(np.isfinite(v[0]) for v in nees.values()):
         print("consistency, position NEES mean (2 if consistent) / share within chi2 95 % (0.95): "
               + ", ".join(f"{rid} {m:.1f} / {f:.2f}" for rid, (m, f) in nees.items()))
+    for kind in ("landmark", "teammate"):
+        if result.nis and any(s.get(f"{kind}_nis_count") for s in result.nis.values()):
+            print(f"NIS of the {kind} updates, mean (2 if consistent) / share within chi2 95 % "
+                  "(0.95): " + ", ".join(
+                      f"{rid} {s[f'{kind}_nis_mean']:.1f} / {s[f'{kind}_nis_in_95']:.2f}"
+                      for rid, s in result.nis.items()))
 
 
 # --------------------------------------------------------------------------------------------
@@ -484,6 +637,16 @@ def add_arguments(p) -> None:
                    help="teleport a robot's estimate this many seconds after the start")
     p.add_argument("--kidnap-robot", type=int, default=None,
                    help="the robot kidnapped (data set id; default the first)")
+    p.add_argument("--heading", default="estimate",
+                   help="estimate (default) or truth: the ground truth's heading given to CoLo's "
+                        "estimators (CoLo-AT's setting)")
+    p.add_argument("--landmark-robots", default=None, metavar="IDS",
+                   help="only these robots get landmark readings, e.g. 1,2,3 (default: all)")
+    p.add_argument("--links", default=None, metavar="LINKS",
+                   help="who hears whom, RECEIVER:SENDER[,SENDER] items, e.g. '1:2 2:3' "
+                        "(default: everyone hears everyone)")
+    p.add_argument("--initial-std", default=None, metavar="X,Y,THETA",
+                   help="std of the known start (default 0.05,0.05,0.05; CoLo-AT: 0.2,0.2,0)")
     p.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
                    help="algorithm parameter, value as JSON (repeatable), e.g. --param fusion=\"sgikf\"")
     p.add_argument("--out", default=None,
@@ -515,11 +678,24 @@ def main(args) -> int:
         raise ValueError(f"--start: unknown value {args.start!r} (known: {', '.join(STARTS)})")
     if not args.calibration_s >= 0:
         raise ValueError(f"--calibration-s must be >= 0, got {args.calibration_s}")
+    extra = {}
+    if args.landmark_robots is not None:
+        try:
+            extra["landmark_robots"] = tuple(int(v) for v in args.landmark_robots.split(",") if v)
+        except ValueError:
+            raise ValueError(f"--landmark-robots: expected robot ids like 1,2,3, got "
+                             f"{args.landmark_robots!r}") from None
+    if args.initial_std is not None:
+        try:
+            extra["initial_std"] = tuple(float(v) for v in args.initial_std.split(","))
+        except ValueError:
+            raise ValueError(f"--initial-std: expected X,Y,THETA, got {args.initial_std!r}") from None
     config = ReplayConfig(algorithm=args.algorithm, cooperative=args.cooperative, seed=args.seed,
                           dt_s=args.dt_s, params=_parse_params(args.param),
                           duration_s=args.duration_s, calibration=args.calibration,
                           calibration_s=args.calibration_s or None, start=args.start,
-                          kidnap_s=args.kidnap_s, kidnap_robot=args.kidnap_robot)
+                          kidnap_s=args.kidnap_s, kidnap_robot=args.kidnap_robot,
+                          heading=args.heading, links=args.links, **extra)
     dataset = load_dataset(args.path)
     try:
         result = run_replay(dataset, config)
@@ -527,6 +703,10 @@ def main(args) -> int:
         raise ValueError(str(exc)) from None
     scores = score(result)
     print_scores(result, scores, dataset.name)
+    stamps = rmse_at_truth_stamps(result, dataset)
+    print("position RMSE at every ground-truth stamp (CoLo-AT's metric): "
+          + ", ".join(f"{rid} {v:.3f}" for rid, v in stamps.items())
+          + f", mean {np.mean(list(stamps.values())):.3f}")
     if args.out:
         out = Path(args.out)
         plot = plot_trajectories(result, dataset, out / f"trajectories_{plot_name(config.label)}.png")
@@ -537,5 +717,11 @@ def main(args) -> int:
              "kidnap_s": config.kidnap_s,
              "params": dict(config.params),
              "robots": {str(k): v for k, v in scores.items()}}, indent=2))
-        print(f"plot: {plot}")
+        tum = write_tum(result, out)
+        errors = trajectory_errors(result)
+        print(f"plot: {plot}; TUM trajectories: {out}/estimate_R*.tum, groundtruth_R*.tum "
+              f"({len(tum)} files)")
+        print("evo APE / RPE (translation, per metre travelled) RMSE [m]: "
+              + ", ".join(f"{rid} {e['ape_rmse_m']:.3f} / {e['rpe_rmse_m']:.3f}"
+                          for rid, e in errors.items()))
     return 0

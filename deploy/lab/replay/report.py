@@ -31,12 +31,16 @@ from swarmloc.deploy.lab.replay.mrclam import (
 #: The columns of the report's ``results.csv``.
 RESULT_COLUMNS = ("dataset", "algorithm", "cooperative", "calibration", "start", "kidnap_s",
                   "seed", "dt_s", "robot", "position_rmse_m", "heading_rmse_rad", "final_error_m",
-                  "scored_ticks", "localized_s", "rmse_localized_m", "recovery_s", "cpu_s")
+                  "scored_ticks", "localized_s", "rmse_localized_m", "recovery_s",
+                  "position_nees_mean", "position_nees_in_95", "position_cov_trace_m2", "cpu_s")
+#: Consistency columns (issue 46): absent from results files written before them.
+_CONSISTENCY = ("position_nees_mean", "position_nees_in_95", "position_cov_trace_m2")
 _INT = frozenset({"seed", "replication", "robot", "scored_ticks"})
 _FLOAT = frozenset({"dt_s", "position_rmse_m", "heading_rmse_rad", "final_error_m", "cpu_s",
-                    "wall_s", "kidnap_s", "localized_s", "rmse_localized_m", "recovery_s"})
+                    "wall_s", "kidnap_s", "localized_s", "rmse_localized_m", "recovery_s",
+                    *_CONSISTENCY})
 _ROUNDED = frozenset({"position_rmse_m", "heading_rmse_rad", "final_error_m", "localized_s",
-                      "rmse_localized_m", "recovery_s"})
+                      "rmse_localized_m", "recovery_s", *_CONSISTENCY})
 #: Rows of results files written before these columns existed: the Vicon fit, known start.
 _DEFAULTS = {"calibration": "vicon", "start": "known", "kidnap_s": None}
 #: Issue 19's bar for a global localization: under LOCALIZED_M within this long of the start.
@@ -92,6 +96,10 @@ def _label(key) -> str:
     algorithm, cooperative, calibration, start, kidnap_s = key
     return ReplayConfig(algorithm=algorithm, cooperative=cooperative, calibration=calibration,
                         start=start, kidnap_s=kidnap_s).label
+
+
+def _num(value) -> float:
+    return math.nan if value is None else float(value)
 
 
 def _fmt(value, spec: str = "{:.3f}") -> str:
@@ -189,6 +197,14 @@ def write_report(rows: list[dict], out_dir: str | Path, replay_first=None,
     ordered, tracking, global_groups, kidnap_groups = [], [], {}, {}
     for key in configs:
         mine = sorted((r for r in rows if _key(r) == key), key=lambda r: (r["seed"], r["robot"]))
+        settings = sorted({r.get("setting") for r in mine} - {None})
+        if len({(r["seed"], r["robot"]) for r in mine}) < len(mine):
+            # This template tells configurations apart by algorithm, cooperation, calibration,
+            # start and kidnap; rows that differ otherwise (a parameter, CoLo-AT's setting)
+            # would overwrite each other.
+            raise ConfigError(f"settings {', '.join(map(str, settings))} share the configuration "
+                              f"{_label(key)!r} and a seed: this report cannot tell them apart; "
+                              "use `swarmloc report ... --family generic`")
         ordered += mine
         seeds = sorted({r["seed"] for r in mine})
         by_seed = {s: {r["robot"]: r for r in mine if r["seed"] == s} for s in seeds}
@@ -204,8 +220,8 @@ def write_report(rows: list[dict], out_dir: str | Path, replay_first=None,
         elif key[3] != "known":
             global_groups[key] = by_seed
         else:
-            mean_scores = {rid: {k: float(np.mean([by_seed[s][rid][k] for s in seeds]))
-                                 for k in ("position_rmse_m", "heading_rmse_rad")}
+            mean_scores = {rid: {k: float(np.mean([_num(by_seed[s][rid].get(k)) for s in seeds]))
+                                 for k in ("position_rmse_m", "heading_rmse_rad", *_CONSISTENCY)}
                            for rid in robot_ids}
             label = _label(key) + (f" ({len(seeds)} seeds)" if len(seeds) > 1 else "")
             if key[2] == "vicon":
@@ -219,8 +235,8 @@ def write_report(rows: list[dict], out_dir: str | Path, replay_first=None,
         writer = csv.DictWriter(fh, fieldnames=list(RESULT_COLUMNS))
         writer.writeheader()
         for r in ordered:
-            writer.writerow({k: (round(r[k], 4) if k in _ROUNDED and r[k] is not None else r.get(k))
-                             for k in RESULT_COLUMNS})
+            writer.writerow({k: (round(r[k], 4) if k in _ROUNDED and r.get(k) is not None
+                                 else r.get(k)) for k in RESULT_COLUMNS})
     datasets = sorted({r["dataset"] for r in rows})
     dt_s = sorted({r["dt_s"] for r in rows})
     seed = min(r["seed"] for r in rows)
@@ -234,6 +250,16 @@ def write_report(rows: list[dict], out_dir: str | Path, replay_first=None,
                  "Position RMSE [m]", "", format_table(tracking, robot_ids), "",
                  "Heading RMSE [rad]", "", format_table(tracking, robot_ids, "heading_rmse_rad"),
                  ""]
+        consistent = [(label, sc) for label, sc in tracking
+                      if any(math.isfinite(v["position_nees_mean"]) for v in sc.values())]
+        if consistent:
+            text += [("Consistency (the localizers that give a covariance): position NEES, mean "
+                      "over the scored ticks (2 for a consistent filter, more: overconfident), and "
+                      "the share of ticks inside the chi-square 95 % band (0.95 if consistent)."),
+                     "", "Position NEES mean", "",
+                     format_table(consistent, robot_ids, "position_nees_mean", "{:.1f}"), "",
+                     "Share of ticks with the position NEES inside the 95 % band", "",
+                     format_table(consistent, robot_ids, "position_nees_in_95", "{:.2f}"), ""]
     if global_groups:
         for name in datasets:
             if datasets_by_name and name in datasets_by_name:
