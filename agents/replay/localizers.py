@@ -76,7 +76,6 @@ so.
 
 from __future__ import annotations
 
-import difflib
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, fields, replace
@@ -86,6 +85,7 @@ import msgpack
 import numpy as np
 
 from swarmloc.agents.epuck.social_odometry import sgikf_update
+from swarmloc.config import did_you_mean
 from swarmloc.registry import Registry
 from swarmloc.world.replay.replay import MAX_PAYLOAD_BYTES, LandmarkObservation, Message
 
@@ -116,8 +116,7 @@ def reject_unknown_keys(config: Mapping, known, what: str) -> None:
     known = list(known)
     for key in config:
         if key not in known:
-            close = difflib.get_close_matches(str(key), known, n=1, cutoff=0.5)
-            hint = f"; did you mean {close[0]!r}?" if close else ""
+            hint = did_you_mean(str(key), known, 0.5)
             raise ValueError(f"{key}: unknown {what} parameter{hint}")
 
 
@@ -866,8 +865,7 @@ def build_localizer(name: str, setup: LandmarkSetup, rng: np.random.Generator,
     ``ssga``) for one robot; ``params`` are the algorithm's parameters by name (unknown names
     are rejected)."""
     if name not in ALGORITHMS:
-        close = difflib.get_close_matches(str(name), ALGORITHMS.names(), n=1, cutoff=0.3)
-        hint = f"; did you mean {close[0]!r}?" if close else ""
+        hint = did_you_mean(str(name), ALGORITHMS.names(), 0.3)
         raise ValueError(f"algorithm: unknown {name!r} (known: {', '.join(ALGORITHMS)}){hint}")
     algorithm = ALGORITHMS.get(name)
     if not isinstance(rng, np.random.Generator):
