@@ -134,3 +134,26 @@ def test_export_takes_data_both_ways_from_the_command_line(tmp_path, synthetic):
     done = run_swarmloc(["export", str(tmp_path / "nothing.mcap"), "--to", "mrclam", str(tmp_path / "x")],
                         cwd=tmp_path, timeout_s=60)
     assert done.returncode != 0 and "--to mrclam takes a data set folder or a bag" in done.stderr
+
+
+def test_a_topic_of_the_wrong_type_is_named_and_a_failed_write_leaves_nothing(tmp_path, synthetic):
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    path = tmp_path / "wrong-type"
+    with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        conn = writer.add_connection("/robot_1/cmd_vel", "std_msgs/msg/String", typestore=store)
+        writer.write(conn, 1, store.serialize_cdr(store.types["std_msgs/msg/String"](data="go"), "std_msgs/msg/String"))
+    with pytest.raises(MrclamFormatError, match=r"topic /robot_1/cmd_vel has type std_msgs/msg/String, expected "
+                                                r"geometry_msgs/msg/TwistStamped"):
+        load_dataset(path)
+    # a data set that cannot be written (a NaN subject id is no int32) leaves no folder behind
+    rid = synthetic.robot_ids[0]
+    m = synthetic.robots[rid].landmark_measurements
+    bad = Measurements(m.time_s, np.full(len(m), 2**40), m.range_m, m.bearing_rad)
+    spoilt = dataclasses.replace(synthetic, robots={**synthetic.robots,
+                                                    rid: dataclasses.replace(synthetic.robots[rid], landmark_measurements=bad)})
+    with pytest.raises(Exception):  # noqa: B017,PT011 -- whichever error the CDR encoder raises
+        write_rosbag2(spoilt, tmp_path / "half")
+    assert not (tmp_path / "half").exists()

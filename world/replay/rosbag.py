@@ -95,15 +95,23 @@ def _ns(epoch_s: float, time_s: float) -> int:
 
 
 def write_rosbag2(dataset: MrclamDataset, out: str | Path) -> dict[str, int]:
-    """Write ``dataset`` as the rosbag2 folder ``out`` (replaced if it exists); returns the
-    messages written per topic."""
-    from rosbags.rosbag2 import StoragePlugin, Writer
-
+    """Write ``dataset`` as the rosbag2 folder ``out`` (replaced if it exists; removed again if
+    writing fails); returns the messages written per topic."""
     store = _typestore()
     T = store.types
     out = Path(out)
     if out.exists():
         shutil.rmtree(out)
+    try:
+        return _write(dataset, out, store, T)
+    except BaseException:
+        shutil.rmtree(out, ignore_errors=True)  # nothing half-written is left behind
+        raise
+
+
+def _write(dataset: MrclamDataset, out: Path, store, T) -> dict[str, int]:
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
     counts: dict[str, int] = defaultdict(int)
 
     def stamp(ns: int):
@@ -171,6 +179,24 @@ def _robot_of(topic: str) -> tuple[int, str] | None:
         return None
 
 
+#: The types this module reads, by topic (a robot's topics by their last part).
+_TYPES = {
+    LANDMARKS_TOPIC: {"swarmloc_msgs/msg/LandmarkMap"},
+    BARCODES_TOPIC: {"swarmloc_msgs/msg/SubjectCodes"},
+    "ground_truth": {"geometry_msgs/msg/PoseStamped"},
+    "cmd_vel": {"geometry_msgs/msg/TwistStamped"},
+    "odom": {"nav_msgs/msg/Odometry"},
+    "range_bearing": {"swarmloc_msgs/msg/RangeBearing"},
+}
+
+
+def _expected_type(topic: str) -> set[str] | None:
+    if topic in _TYPES:
+        return _TYPES[topic]
+    robot = _robot_of(topic)
+    return _TYPES.get(robot[1]) if robot is not None else None
+
+
 def _yaw(q) -> float:
     return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
 
@@ -196,6 +222,10 @@ def read_rosbag2(path: str | Path, name: str | None = None) -> MrclamDataset:
         from rosbags.typesys import get_types_from_msg
 
         for conn in reader.connections:
+            want = _expected_type(conn.topic)
+            if want is not None and conn.msgtype not in want:
+                raise MrclamFormatError(f"{path.name}: topic {conn.topic} has type {conn.msgtype}, "
+                                        f"expected {' or '.join(sorted(want))} (docs/mrclam/bags.md)")
             if conn.msgtype not in store.types and conn.msgdef:  # a type the bag defines: its definition
                 store.register(get_types_from_msg(conn.msgdef.data, conn.msgtype))
         seen: dict[str, int] = defaultdict(int)
