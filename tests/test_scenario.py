@@ -423,3 +423,21 @@ def test_scenarios_command_lists_every_family(capsys):
     families = {family for _, family in rows}
     assert families == {"foraging", "laser", "vision", "replay"}
     assert ["ES3", "foraging"] in rows and ["vision-exp3", "vision"] in rows
+
+
+def test_every_key_value_of_the_command_line_is_read_one_way():
+    # Issue 48: KEY=VALUE was parsed three ways (TOML for --set, a TOML copy in the experiment
+    # engine, JSON for mrclam --param); one reading now, config.parse_assignment.
+    from swarmloc.config import ConfigError, apply_overrides, parse_assignment
+    from swarmloc.deploy.lab.experiment import _parse_sets
+    from swarmloc.deploy.lab.replay.mrclam import _parse_params
+
+    items = ['a=1', 'b = 0.5', 'c="x y"', 'd=true', 'e=[1, 2]', 'f=plain text', 'g.h=1e9']
+    expected = {"a": 1, "b": 0.5, "c": "x y", "d": True, "e": [1, 2], "f": "plain text", "g.h": 1e9}
+    assert dict(parse_assignment(i) for i in items) == expected
+    assert _parse_params(items) == expected
+    assert _parse_sets(items) == expected
+    assert apply_overrides({}, ["g.h=1e9", 'c="x y"']) == {"g": {"h": 1e9}, "c": "x y"}
+    for bad, flag in (("=3", "--param"), ("novalue", "--set")):
+        with pytest.raises(ConfigError, match=rf"{flag} '{bad}': expected KEY=VALUE"):
+            parse_assignment(bad, flag)

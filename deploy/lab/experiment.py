@@ -343,18 +343,11 @@ def with_overrides(spec: ExperimentSpec, *, replications: int | None = None,
 def _parse_sets(items: list[str]) -> dict[str, Any]:
     """``["a.b=1", 'c="x"']`` -> ``{"a.b": 1, "c": "x"}`` (values as TOML literals, or bare
     text when they are not one)."""
-    import tomllib
+    from swarmloc.config import parse_assignment
 
     out: dict[str, Any] = {}
     for item in items:
-        key, sep, text = item.partition("=")
-        key = key.strip()
-        if not sep or not key:
-            raise ValueError(f"--set {item!r}: expected KEY=VALUE")
-        try:
-            value = tomllib.loads(f"v = {text}")["v"]
-        except tomllib.TOMLDecodeError:
-            value = text
+        key, value = parse_assignment(item, "--set")
         _check_key(key, "--set")
         _check_value(value, f"--set '{key}'")
         out[key] = value

@@ -143,21 +143,30 @@ def parse_value(text: str):
         return text
 
 
+def parse_assignment(item: str, flag: str = "--set") -> tuple[str, Any]:
+    """``"key=value"`` -> ``(key, value)``, the value read by :func:`parse_value` (TOML, else a
+    plain string): the one reading of every ``KEY=VALUE`` of the command line and the API
+    (``--set``, ``--param``, keyword settings). ConfigError naming ``flag`` if it has no key."""
+    key, sep, text = str(item).partition("=")
+    key = key.strip()
+    if not sep or not key:
+        raise ConfigError(f"{flag} {item!r}: expected KEY=VALUE, e.g. agent.strategy=NC")
+    return key, parse_value(text.strip())
+
+
 def apply_overrides(data: dict, overrides: list[str]) -> dict:
     """Return a copy of ``data`` with ``dotted.key=value`` overrides applied."""
     import copy
 
     out = copy.deepcopy(data)
     for item in overrides:
-        key, sep, text = item.partition("=")
-        if not sep or not key.strip():
-            raise ConfigError(f"override '{item}': expected KEY=VALUE, e.g. agent.strategy=NC")
-        parts = key.strip().split(".")
+        key, value = parse_assignment(item, "override")
+        parts = key.split(".")
         node = out
         for part in parts[:-1]:
             child = node.setdefault(part, {})
             if not isinstance(child, dict):
                 raise ConfigError(f"override '{item}': '{part}' is not a table")
             node = child
-        node[parts[-1]] = parse_value(text.strip())
+        node[parts[-1]] = value
     return out

@@ -657,16 +657,11 @@ def add_arguments(p) -> None:
 
 
 def _parse_params(items: Sequence[str]) -> dict:
-    params = {}
-    for item in items:
-        key, sep, value = item.partition("=")
-        if not sep or not key:
-            raise ValueError(f"--param {item!r}: expected KEY=VALUE")
-        try:
-            params[key] = json.loads(value)
-        except json.JSONDecodeError:
-            params[key] = value
-    return params
+    """``--param KEY=VALUE`` values, read as every ``KEY=VALUE`` is (TOML, else a plain string:
+    ``swarmloc.config.parse_assignment``)."""
+    from swarmloc.config import parse_assignment
+
+    return dict(parse_assignment(item, "--param") for item in items)
 
 
 def main(args) -> int:
