@@ -40,7 +40,7 @@ def brain_from_welcome(welcome: Welcome, *, null_brain: bool = False) -> AgentBr
 
     ``null_brain``: a :class:`~swarmloc.agents.epuck.agent.StandstillAgent` instead (e-puck scenarios only), for transport
     benchmarks."""
-    from swarmloc.deploy.scenario import scenario_from_dict
+    from swarmloc.families import scenario_from_dict
 
     try:
         loaded = scenario_from_dict(welcome.scenario)

@@ -23,6 +23,10 @@ from swarmloc.config import (
     load_toml,
     to_dict,
 )
+
+# AnyScenario, family_of and scenario_from_dict live with the Family registry (swarmloc/families.py),
+# below deploy/: an agent process builds its brain from the world's scenario without this module.
+from swarmloc.families import AnyScenario, family_of, scenario_from_dict
 from swarmloc.world.epuck.foraging import WorldConfig
 
 DEFAULT_SCENARIO = "ES1"
@@ -169,63 +173,8 @@ def load_scenario(name_or_path: str = DEFAULT_SCENARIO, overrides: list[str] = (
     return Scenario.from_dict(data)
 
 
-@dataclass(frozen=True)
-class AnyScenario:
-    """A scenario of any robot family, as the process commands (``run``, ``world``) need it."""
-
-    family: str
-    scenario: object
-
-    @property
-    def name(self) -> str:
-        return self.scenario.name
-
-    @property
-    def seed(self) -> int:
-        return self.scenario.world.seed
-
-    @property
-    def robots(self) -> int:
-        robots = self.scenario.world.robots
-        return robots if isinstance(robots, int) else len(robots)
-
-    @property
-    def n_ticks(self) -> int:
-        """Ticks of a run: the family's scenario class says (its ``n_ticks``)."""
-        return self.scenario.n_ticks
-
-    @property
-    def label(self) -> str:
-        """What distinguishes runs of one scenario (the strategy, the algorithm, ...): the
-        family's scenario class says (its ``label``)."""
-        return self.scenario.label
-
-    def to_dict(self) -> dict:
-        return {"family": self.family, **self.scenario.to_dict()}
-
-
-def family_of(data: dict) -> str:
-    from swarmloc.families import FAMILIES
-
-    family = data.get("family", "foraging")
-    try:
-        return FAMILIES.canonical(family)
-    except ValueError as exc:
-        raise ConfigError(f"family: {exc}") from None
-
-
-def scenario_from_dict(data: dict) -> AnyScenario:
-    """A scenario of any family from its plain dict, as a run folder's ``scenario.json``, a
-    world's Welcome or :meth:`AnyScenario.to_dict` carries it; ConfigError names what is wrong."""
-    from swarmloc.families import FAMILIES
-    from swarmloc.registry import resolve
-
-    family = family_of(data)
-    cls = resolve(FAMILIES.get(family).scenario)
-    fields = {k: v for k, v in data.items() if k != "family"}
-    if "family" in getattr(cls, "__dataclass_fields__", {}):
-        fields["family"] = family
-    return AnyScenario(family, cls.from_dict(fields))
+# AnyScenario, family_of and scenario_from_dict live with the Family registry (swarmloc/families.py),
+# below deploy/: an agent process builds its brain from the world's scenario without this module.
 
 
 def load_any(name_or_path: str, flags: dict | None = None, overrides: list[str] = ()) -> AnyScenario:

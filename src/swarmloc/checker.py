@@ -155,7 +155,7 @@ def _run(scenario, ticks: int, corrupt: bool = False) -> dict:
 def _with(scenario, key: str, value):
     """``scenario`` with one value replaced: in its ``world`` table where that has the key (the
     families with a world table), else at the top (MRCLAM's flat scenarios)."""
-    from swarmloc.deploy.scenario import scenario_from_dict
+    from swarmloc.families import scenario_from_dict
 
     data = scenario.to_dict()
     section = data["world"] if key in data.get("world", {}) else data

@@ -15,7 +15,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from swarmloc.registry import Registry
+from swarmloc.config import ConfigError
+from swarmloc.registry import Registry, resolve
 
 
 @dataclass(frozen=True)
@@ -98,3 +99,60 @@ FAMILIES.register("replay", Family(
     flags={"seed": "seed", "duration_s": "duration_s", "algorithm": "algorithm"},
     seeded_world=False, frames="swarmloc.deploy.observe.frames:ReplaySource",
     experiment="swarmloc.deploy.lab.replay.experiment", report="swarmloc.deploy.lab.replay.report:TEMPLATE"))
+
+
+# -- a scenario of any family ------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class AnyScenario:
+    """A scenario of any robot family, as the process commands (``run``, ``world``) need it."""
+
+    family: str
+    scenario: object
+
+    @property
+    def name(self) -> str:
+        return self.scenario.name
+
+    @property
+    def seed(self) -> int:
+        return self.scenario.world.seed
+
+    @property
+    def robots(self) -> int:
+        robots = self.scenario.world.robots
+        return robots if isinstance(robots, int) else len(robots)
+
+    @property
+    def n_ticks(self) -> int:
+        """Ticks of a run: the family's scenario class says (its ``n_ticks``)."""
+        return self.scenario.n_ticks
+
+    @property
+    def label(self) -> str:
+        """What distinguishes runs of one scenario (the strategy, the algorithm, ...): the
+        family's scenario class says (its ``label``)."""
+        return self.scenario.label
+
+    def to_dict(self) -> dict:
+        return {"family": self.family, **self.scenario.to_dict()}
+
+
+def family_of(data: dict) -> str:
+    family = data.get("family", "foraging")
+    try:
+        return FAMILIES.canonical(family)
+    except ValueError as exc:
+        raise ConfigError(f"family: {exc}") from None
+
+
+def scenario_from_dict(data: dict) -> AnyScenario:
+    """A scenario of any family from its plain dict, as a run folder's ``scenario.json``, a
+    world's Welcome or :meth:`AnyScenario.to_dict` carries it; ConfigError names what is wrong."""
+    family = family_of(data)
+    cls = resolve(FAMILIES.get(family).scenario)
+    fields = {k: v for k, v in data.items() if k != "family"}
+    if "family" in getattr(cls, "__dataclass_fields__", {}):
+        fields["family"] = family
+    return AnyScenario(family, cls.from_dict(fields))
