@@ -14,13 +14,10 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 
 #: (file, module imported) still to move: the replay world and brain build from the in-process
-#: evaluation (deploy/lab/replay/mrclam.py), the vision agent and world from the vision runner's
-#: scenario and layout.
+#: evaluation (deploy/lab/replay/mrclam.py).
 KNOWN = {
     ("agents/replay/agent.py", "swarmloc.deploy.lab.replay.mrclam"),
-    ("agents/vision/agent.py", "swarmloc.deploy.lab.vision.runner"),
     ("world/replay/service.py", "swarmloc.deploy.lab.replay.mrclam"),
-    ("world/vision/service.py", "swarmloc.deploy.lab.vision.runner"),
 }
 
 

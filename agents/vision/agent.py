@@ -42,7 +42,7 @@ class VisionAgent:
     @classmethod
     def from_welcome(cls, welcome: Welcome, scenario) -> VisionAgent:
         from swarmloc.agents.vision.brain import VisionBrain
-        from swarmloc.deploy.lab.vision.runner import AGENT_STREAM, world_config
+        from swarmloc.world.vision.scenario import AGENT_STREAM, world_config
 
         seed = scenario.world.seed
         try:

@@ -86,7 +86,7 @@ FAMILIES.register("laser", Family(
     frames="swarmloc.deploy.observe.frames:LaserSource",
     experiment="swarmloc.deploy.lab.laser.experiment", report="swarmloc.deploy.lab.laser.report:TEMPLATE"))
 FAMILIES.register("vision", Family(
-    scenario="swarmloc.deploy.lab.vision.runner:VisionScenario",
+    scenario="swarmloc.world.vision.scenario:VisionScenario",
     world="swarmloc.world.vision.service:VisionService",
     brain="swarmloc.agents.vision.agent:VisionAgent.from_welcome",
     flags={"seed": "world.seed", "duration_s": "setup.duration_s"},

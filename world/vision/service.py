@@ -35,8 +35,8 @@ class VisionService:
     act_type = VisionAct
 
     def __init__(self, scenario) -> None:
-        from swarmloc.deploy.lab.vision.runner import world_config
         from swarmloc.world.vision.camera import OBJECT_KINDS
+        from swarmloc.world.vision.scenario import world_config
         from swarmloc.world.vision.world import STOP, VisionWorld
 
         self.scenario = scenario
