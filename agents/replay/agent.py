@@ -25,7 +25,7 @@ class ReplayAgent:
     @classmethod
     def from_welcome(cls, welcome: Welcome, scenario) -> ReplayAgent:
         from swarmloc.config import ConfigError
-        from swarmloc.deploy.lab.replay.mrclam import replay_localizer, replay_world
+        from swarmloc.world.replay.evaluation import replay_localizer, replay_world
 
         try:
             dataset = scenario.load()

@@ -67,7 +67,7 @@ class ReplayScenario:
             raise ConfigError(f"replay scenario: {exc}") from None
 
     def config(self):
-        from swarmloc.deploy.lab.replay.mrclam import ReplayConfig
+        from swarmloc.world.replay.evaluation import ReplayConfig
 
         return ReplayConfig(algorithm=self.algorithm, cooperative=self.cooperative, seed=self.seed,
                             dt_s=self.dt_s, params=dict(self.params), duration_s=self.duration_s,
@@ -124,7 +124,7 @@ class _ReplayFacts:
         self.seed = scenario.seed
         dataset = scenario.load()
         self.robots = len(dataset.robot_ids)
-        from swarmloc.deploy.lab.replay.mrclam import replay_world
+        from swarmloc.world.replay.evaluation import replay_world
 
         self.steps = replay_world(dataset, scenario.config()).n_ticks
 
@@ -134,7 +134,7 @@ class ReplayService(DrivenRobots):
     act_type = EstimateAct
 
     def __init__(self, scenario: ReplayScenario) -> None:
-        from swarmloc.deploy.lab.replay.mrclam import replay_world
+        from swarmloc.world.replay.evaluation import replay_world
 
         self.scenario = scenario
         self.config = scenario.config()
@@ -191,7 +191,7 @@ class ReplayService(DrivenRobots):
         )
 
     def summary(self) -> dict:
-        from swarmloc.deploy.lab.replay.mrclam import ReplayResult, score
+        from swarmloc.world.replay.evaluation import ReplayResult, score
 
         k = self.world.tick
         if k == 0:
