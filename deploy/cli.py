@@ -62,9 +62,11 @@ def _scenario_args(p: argparse.ArgumentParser, positional: bool = True) -> None:
                         "goals-25 (nest and prey at 25 / 75 %% of the long side)")
 
 
-def load_from_args(args, any_family: bool = False):
+def load_from_args(args, any_family: bool = False, refuse_central: bool = True):
     """The scenario named by the arguments, with every override applied and validated: an e-puck
-    :class:`Scenario`, or with ``any_family`` an :class:`AnyScenario` of any robot family."""
+    :class:`Scenario`, or with ``any_family`` an :class:`AnyScenario` of any robot family (an
+    e-puck strategy shared by a central system refused unless ``refuse_central`` is False: only
+    the batch engine runs those)."""
     from swarmloc.deploy.scenario import load_any, variant_overrides
 
     overrides = variant_overrides(getattr(args, "variant", None)) + list(args.set)
@@ -77,7 +79,8 @@ def load_from_args(args, any_family: bool = False):
              for flag in ("robots", "strategy", "beta", "seed", "duration_s", "algorithm")}
     loaded = load_any(args.scenario, flags, overrides)
     if any_family:
-        _refuse_central(loaded)
+        if refuse_central:
+            _refuse_central(loaded)
         return loaded
     if loaded.family != "foraging":
         raise ConfigError(f"scenario '{args.scenario}' is a {loaded.family} scenario; "
@@ -254,7 +257,10 @@ def main_batch(args) -> int:
     from swarmloc.deploy.lab.epuck.batch import run_batch
     from swarmloc.deploy.run import print_metrics
 
-    scenario = load_from_args(args)
+    loaded = load_from_args(args, any_family=True, refuse_central=False)
+    if loaded.family != "foraging":
+        return _batch_other_family(args, loaded)
+    scenario = loaded.scenario
     _compile_kernels()
     t0 = time.perf_counter()
     if args.record:
@@ -270,6 +276,48 @@ def main_batch(args) -> int:
         print(json.dumps(summary))
     else:
         print_metrics(summary)
+    return 0
+
+
+def _batch_other_family(args, loaded) -> int:
+    """``swarmloc batch`` of a laser, vision or replay scenario (any family with experiment
+    hooks): one seeded run in this process by the family's experiment hooks, as ``swarmloc
+    experiment`` runs a job; prints its row (``--json``: as JSON). ``--record`` is the e-puck
+    batch engine's only."""
+    from swarmloc.config import parse_assignment
+    from swarmloc.deploy.lab.experiment import ExperimentSpec, GroupSpec, _rows, plan, run_job
+    from swarmloc.deploy.scenario import variant_overrides
+    from swarmloc.families import FAMILIES
+
+    if args.record:
+        raise ConfigError(f"--record: the batch engine records e-puck runs; record a {loaded.family} run "
+                          f"with `swarmloc run {args.scenario} --record FILE.mcap`")
+    fixed = {}
+    flags = {flag: getattr(args, flag, None) for flag in ("robots", "strategy", "beta", "duration_s", "algorithm")}
+    keys = FAMILIES.get(loaded.family).flags
+    for flag, value in flags.items():
+        if value is not None:
+            fixed[keys[flag]] = value  # load_from_args already refused a flag the family has no use for
+    for item in variant_overrides(getattr(args, "variant", None)) + list(args.set):
+        key, value = parse_assignment(item)
+        fixed[key] = value
+    seed = loaded.seed
+    spec = ExperimentSpec(name="batch", description=f"swarmloc batch {args.scenario}", replications=1, seed=seed,
+                          family=loaded.family,
+                          group=(GroupSpec(name="batch", scenarios=(args.scenario,), set=fixed or None),))
+    (job,) = plan(spec)
+    t0 = time.perf_counter()
+    row = dict(zip(spec.columns(), _rows(spec, job, run_job(job))[0], strict=True))
+    row["wall_s"] = round(time.perf_counter() - t0, 2)
+    if args.json:
+        print(json.dumps(row, default=str))
+    else:
+        print(f"scenario {loaded.name}  {loaded.family}  {loaded.label}  seed {seed}  robots {loaded.robots}")
+        for key, value in row.items():
+            if key in ("experiment", "group", "setting", "scenario", "seed", "replication", "config_hash"):
+                continue
+            text = str(value)
+            print(f"  {key:29s}: {text if len(text) <= 60 else '(a series: see --json)'}")
     return 0
 
 
@@ -401,7 +449,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--announce", action="store_true", help="print the bound endpoints as one JSON line")
     p.set_defaults(func=main_router)
 
-    p = sub.add_parser("batch", help="run a scenario in one process, no Zenoh")
+    p = sub.add_parser("batch", help="run a scenario in one process, no Zenoh (e-puck: the batch engine; "
+                                     "other families: one run as an experiment job)")
     _scenario_args(p)
     p.add_argument("--json", action="store_true")
     p.add_argument("--record", default=None, metavar="FILE.mcap",

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import json
 import textwrap
 
 import numpy as np
@@ -350,3 +351,20 @@ def test_laser_spec_runs_in_the_pool_and_resumes(tmp_path):
     page = (report / "README.md").read_text()
     assert "swarmloc experiment laser-tiny --replications 2 --out results/laser-tiny.csv" in page
     assert len(read_rows(report / "results.csv")) == 2
+
+
+def test_swarmloc_batch_runs_a_scenario_of_any_family_as_its_experiment_job(capsys):
+    # Issue 48: `batch` refused laser scenarios while its help listed laser algorithms; it now
+    # runs any family with experiment hooks, one job in this process, the row the engine writes.
+    from swarmloc.deploy.lab.laser.runner import load_laser_scenario, run_laser
+
+    assert cli_main(["batch", "laser-collab-three-rooms", "--algorithm", "ssga", "--seed", "4",
+                     "--set", "world.steps=30", "--json"]) == 0
+    row = json.loads(capsys.readouterr().out)
+    assert row["algorithm"] == "ssga" and int(row["seed"]) == 4 and int(row["steps"]) == 30
+    # the same run as the laser runner's, in this process
+    direct = run_laser(load_laser_scenario("laser-collab-three-rooms",
+                                           ['algorithm.name="ssga"', "world.seed=4", "world.steps=30"]))
+    assert float(row["final_error_m"]) == pytest.approx(direct.summary["final_error_m"], abs=1e-3)
+    assert cli_main(["batch", "laser-collab-three-rooms", "--record", "x.mcap"]) == 2
+    assert "the batch engine records e-puck runs" in capsys.readouterr().err
