@@ -38,7 +38,7 @@ class LsqFix:
     def __init__(self, setup: LandmarkSetup, rng: np.random.Generator, params: dict):
         unknown = set(params) - set(DEFAULTS)
         if unknown:
-            raise ValueError(f"{sorted(unknown)[0]}: unknown lsq-fix parameter (known: {', '.join(DEFAULTS)})")
+            raise ValueError(f"{min(unknown)}: unknown lsq-fix parameter (known: {', '.join(DEFAULTS)})")
         p = {**DEFAULTS, **params}
         if int(p["min_landmarks"]) < 2 or float(p["max_step_m"]) <= 0:
             raise ValueError("min_landmarks must be >= 2 and max_step_m > 0")
