@@ -27,8 +27,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from swarmloc.agents.laser.ssga import GeneticLocalizer, GeneticParams
 from swarmloc.agents.laser.registry import ALGORITHMS, AlgorithmEntry
+from swarmloc.agents.laser.ssga import GeneticLocalizer, GeneticParams
 from swarmloc.world.laser.laser import wrap_angle
 from swarmloc.world.laser.maps import free_space_sample
 
