@@ -352,7 +352,7 @@ def test_an_agent_killed_under_respawn_is_forked_again_and_its_robot_moves(tmp_p
     # Issue 47: a restarted `swarmloc agent` took 4.6-7 s to be live (imports, kernels); the
     # warm server forks it again at once. The run completes with the robot back, and the world
     # counts the rejoin.
-    path = _es1_file(tmp_path, robots=3, duration_s=30.0)
+    path = _es1_file(tmp_path, robots=3, duration_s=16.0)  # real time: the test lasts the run
     run = "resp" + uuid.uuid4().hex[:8]
     with supervised() as sup:
         swarm = start_swarm(sup, path, run=run, robots=3, out=tmp_path / "out", log_dir=tmp_path / "logs",
