@@ -148,7 +148,19 @@ def test_a_topic_of_the_wrong_type_is_named_and_a_failed_write_leaves_nothing(tm
     with pytest.raises(MrclamFormatError, match=r"topic /robot_1/cmd_vel has type std_msgs/msg/String, expected "
                                                 r"geometry_msgs/msg/TwistStamped"):
         load_dataset(path)
-    # a data set that cannot be written (a NaN subject id is no int32) leaves no folder behind
+    # a bag of robots' topics without the landmark map
+    path = tmp_path / "no-map"
+    with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        conn = writer.add_connection("/robot_1/cmd_vel", "geometry_msgs/msg/TwistStamped", typestore=store)
+        T = store.types
+        msg = T["geometry_msgs/msg/TwistStamped"](
+            header=T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=1, nanosec=0), frame_id="r"),
+            twist=T["geometry_msgs/msg/Twist"](linear=T["geometry_msgs/msg/Vector3"](x=0.1, y=0.0, z=0.0),
+                                               angular=T["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0)))
+        writer.write(conn, 1, store.serialize_cdr(msg, "geometry_msgs/msg/TwistStamped"))
+    with pytest.raises(MrclamFormatError, match=r"no /landmarks message: the landmark map is needed"):
+        load_dataset(path)
+    # a data set that cannot be written (a subject id beyond int32) leaves no folder behind
     rid = synthetic.robot_ids[0]
     m = synthetic.robots[rid].landmark_measurements
     bad = Measurements(m.time_s, np.full(len(m), 2**40), m.range_m, m.bearing_rad)
