@@ -308,7 +308,22 @@ def test_binary_file_is_rejected(folder):
 
 def test_duplicate_barcode_is_rejected(folder):
     _rewrite(folder / "Barcodes.dat", lambda lines: lines + ["  21 \t  " + lines[4].split()[1]])
-    with pytest.raises(MrclamFormatError, match=r"Barcodes\.dat: barcode \d+ is listed twice"):
+    with pytest.raises(MrclamFormatError, match=r"Barcodes\.dat: data row \d+: barcode \d+ is listed twice "
+                                                r"\(first at data row 1\)"):
+        load_dataset(folder)
+
+
+def test_duplicate_landmark_is_named_with_both_rows(folder):
+    # issue 46: a landmark file with duplicates gets an error naming the file and the rows
+    _rewrite(folder / "Landmark_Groundtruth.dat", lambda lines: [*lines[:-1], lines[5], lines[-1]])
+    with pytest.raises(MrclamFormatError, match=r"Landmark_Groundtruth\.dat: data row \d+: landmark subject id "
+                                                r"\d+ is listed twice \(first at data row 2\)"):
+        load_dataset(folder)
+
+
+def test_a_robot_without_odometry_is_named(folder):
+    _rewrite(folder / "Robot3_Odometry.dat", lambda lines: lines[:4])
+    with pytest.raises(MrclamFormatError, match=r"Robot3_Odometry\.dat has no data rows"):
         load_dataset(folder)
 
 

@@ -235,6 +235,16 @@ def _read_table(path: Path, n_columns: int, what: str) -> np.ndarray:
     return table
 
 
+def _refuse_repeats(values: np.ndarray, path: Path, label: str) -> None:
+    """MrclamFormatError naming the first value listed twice and both data rows."""
+    first: dict[int, int] = {}
+    for row, value in enumerate(values.tolist(), start=1):
+        if value in first:
+            raise MrclamFormatError(f"{path.name}: data row {row}: {label} {value} is listed twice "
+                                    f"(first at data row {first[value]})")
+        first[value] = row
+
+
 def _integer_column(table: np.ndarray, column: int, path: Path, what: str) -> np.ndarray:
     values = table[:, column]
     bad = np.flatnonzero(values != np.round(values))
@@ -295,17 +305,14 @@ def load_dataset(folder: str | Path, name: str | None = None) -> MrclamDataset:
     subjects = _integer_column(table, 0, path, "subject id")
     codes = _integer_column(table, 1, path, "barcode")
     for values, label in ((subjects, "subject id"), (codes, "barcode")):
-        uniq, counts = np.unique(values, return_counts=True)
-        if np.any(counts > 1):
-            raise MrclamFormatError(f"{path.name}: {label} {uniq[counts > 1][0]} is listed twice")
+        _refuse_repeats(values, path, label)
     barcodes = {int(s): int(c) for s, c in zip(subjects, codes)}
     subject_of_barcode = {c: s for s, c in barcodes.items()}
 
     path = folder / "Landmark_Groundtruth.dat"
     table = _read_table(path, 5, "subject id, x, y, x std-dev, y std-dev")
     landmark_ids = _integer_column(table, 0, path, "subject id")
-    if len(np.unique(landmark_ids)) != len(landmark_ids):
-        raise MrclamFormatError(f"{path.name}: a landmark subject id is listed twice")
+    _refuse_repeats(landmark_ids, path, "landmark subject id")
     landmarks = Landmarks(landmark_ids, table[:, 1:3].copy(), table[:, 3:5].copy())
     clash = set(landmark_ids.tolist()) & set(robot_files)
     if clash:
@@ -333,6 +340,9 @@ def load_dataset(folder: str | Path, name: str | None = None) -> MrclamDataset:
         if raw[robot_id]["gt"].shape[0] == 0:
             raise MrclamFormatError(
                 f"Robot{robot_id}_Groundtruth.dat has no data rows (the initial pose comes from it)")
+        if raw[robot_id]["odo"].shape[0] == 0:
+            raise MrclamFormatError(
+                f"Robot{robot_id}_Odometry.dat has no data rows (the robot's motion comes from it)")
     epoch = min(float(r["gt"][0, 0]) for r in raw.values())
 
     landmark_set = set(landmark_ids.tolist())
