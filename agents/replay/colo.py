@@ -626,6 +626,15 @@ class _ColoBase:
 
     split = False
 
+    def _begin(self, obs: LandmarkObservation):
+        """The start of every step: the observation checked and calibrated, the joint state
+        started from the first one; returns ``(obs, joint, params)``."""
+        check_observation(obs, self.setup.robot_id)
+        obs = calibrated(obs, self.setup.camera)
+        if self.joint is None:
+            self.joint = self._start(obs)
+        return obs, self.joint, self.params
+
     def __init__(self, setup: LandmarkSetup, params: ColoParams, rng: np.random.Generator | None = None):
         if not isinstance(setup, LandmarkSetup):
             raise TypeError(f"setup must be a LandmarkSetup, got {type(setup).__name__}")
@@ -724,11 +733,7 @@ class ReplicaLocalizer(_ColoBase):
         self._pending: TickEvents | None = None
 
     def step(self, obs: LandmarkObservation) -> None:
-        check_observation(obs, self.setup.robot_id)
-        obs = calibrated(obs, self.setup.camera)
-        if self.joint is None:
-            self.joint = self._start(obs)
-        joint, p = self.joint, self.params
+        obs, joint, p = self._begin(obs)
         own = TickEvents.of(obs)
         if self.setup.cooperative:
             events: dict[int, TickEvents] = {}
@@ -790,11 +795,7 @@ class LsCiLocalizer(_ColoBase):
     """``ls-ci``: Carrillo-Arce et al. 2013 (see the module docstring)."""
 
     def step(self, obs: LandmarkObservation) -> None:
-        check_observation(obs, self.setup.robot_id)
-        obs = calibrated(obs, self.setup.camera)
-        if self.joint is None:
-            self.joint = self._start(obs)
-        joint, p = self.joint, self.params
+        obs, joint, p = self._begin(obs)
         propagate_robot(joint, 0, self.setup, p.noise_model, obs.odometry_v_mps,
                         obs.odometry_omega_rad_s, obs.odometry_dt_s, obs.true_heading_rad,
                         p.motion_noise_scale)
@@ -841,11 +842,7 @@ class GlobalStateLocalizer(_ColoBase):
         super().__init__(setup, params, rng)
 
     def step(self, obs: LandmarkObservation) -> None:
-        check_observation(obs, self.setup.robot_id)
-        obs = calibrated(obs, self.setup.camera)
-        if self.joint is None:
-            self.joint = self._start(obs)
-        joint, p = self.joint, self.params
+        obs, joint, p = self._begin(obs)
         reports = self._decode(obs) if self.setup.cooperative else {}
         states = {}
         for rid, rep in reports.items():
