@@ -7,8 +7,9 @@ memory of the run's processes (``/proc/PID/smaps_rollup``), and prints one line 
 
 - ticks/s over the window, overruns and late Acts in the window, messages rejected so far;
 - the world's tick p50 / p99 so far (cumulative: the world keeps every tick's duration);
-- PSS of the world, of all agents together (with the agent server), and of the whole tree;
-  the world's RSS.
+- PSS of the world, of all agents together, of the agent server (``swarmloc agents``, which
+  forks them), and of the whole tree; the world's RSS. A local run has no router: agents and
+  world meet in peer mode, so there is no router process to measure.
 
 It ends by comparing the first and the last window (after the first, which includes start-up):
 ticks/s and the memory figures, as ratios. No growth beyond noise is the target.
@@ -41,14 +42,15 @@ def snapshot(run: Run) -> dict:
     tree = [run.proc.pid, *descendants(run.proc.pid, parent)]
     mem = {pid: memory_kib(pid) for pid in tree}
     pss = {pid: m[0] for pid, m in mem.items() if m}
-    agent_side = set(agents) | {parent[a] for a in agents if parent.get(a) not in (None, run.proc.pid)}
+    servers = {parent[a] for a in agents if parent.get(a) not in (None, run.proc.pid)}
     tr = t.get("transport", {})
     return {"at": time.monotonic(), "wall_s": tr.get("wall_s", 0.0), "ticks": tr.get("ticks", 0), "overruns": tr.get("overruns", 0),
             "late": tr.get("late_acts", 0), "rejected": sum(t.get("rejected", {}).values()),
             "p50": tr.get("tick_ms_p50"), "p99": tr.get("tick_ms_p99"),
             "pss_world": pss.get(world, 0) if world else 0,
             "rss_world": (mem.get(world) or (0, 0))[1] if world else 0,
-            "pss_agents": sum(pss.get(p, 0) for p in agent_side), "pss_tree": sum(pss.values())}
+            "pss_agents": sum(pss.get(p, 0) for p in agents), "pss_server": sum(pss.get(p, 0) for p in servers),
+            "pss_tree": sum(pss.values())}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -67,7 +69,7 @@ def main(argv: list[str] | None = None) -> int:
             return 1
         print(f"{args.robots} agents joined in {joined:.1f} s; windows of {args.window_min:g} min", flush=True)
         print(f"{'min':>5} {'ticks/s':>8} {'overruns':>8} {'late':>6} {'rejected':>8} {'p50 ms':>7} {'p99 ms':>7} "
-              f"{'world PSS MiB':>13} {'world RSS MiB':>13} {'agents PSS MiB':>14} {'tree PSS MiB':>12}", flush=True)
+              f"{'world PSS MiB':>13} {'world RSS MiB':>13} {'agents PSS MiB':>14} {'server PSS MiB':>14} {'tree PSS MiB':>12}", flush=True)
         windows = []
         previous = {}
         while not previous and run.proc.poll() is None:
@@ -86,11 +88,11 @@ def main(argv: list[str] | None = None) -> int:
             w = {"min": (now["at"] - start) / 60.0,
                  "ticks_per_s": (now["ticks"] - previous["ticks"]) / dt if dt > 0 else 0.0,
                  "overruns": now["overruns"] - previous["overruns"], "late": now["late"] - previous["late"],
-                 **{k: now[k] for k in ("rejected", "p50", "p99", "pss_world", "rss_world", "pss_agents", "pss_tree")}}
+                 **{k: now[k] for k in ("rejected", "p50", "p99", "pss_world", "rss_world", "pss_agents", "pss_server", "pss_tree")}}
             windows.append(w)
             print(f"{w['min']:5.1f} {w['ticks_per_s']:8.2f} {w['overruns']:8d} {w['late']:6d} {w['rejected']:8d} "
                   f"{w['p50'] or 0:7.1f} {w['p99'] or 0:7.1f} {w['pss_world'] / 1024:13.1f} {w['rss_world'] / 1024:13.1f} "
-                  f"{w['pss_agents'] / 1024:14.1f} {w['pss_tree'] / 1024:12.1f}", flush=True)
+                  f"{w['pss_agents'] / 1024:14.1f} {w['pss_server'] / 1024:14.1f} {w['pss_tree'] / 1024:12.1f}", flush=True)
             previous = now
         run.close_watch()
         code = run.proc.wait()
@@ -98,7 +100,7 @@ def main(argv: list[str] | None = None) -> int:
         if len(steady) >= 2:
             a, b = steady[0], steady[-1]
             print("last window / first steady window: " + ", ".join(
-                f"{k} {b[k] / a[k]:.3f}" for k in ("ticks_per_s", "pss_world", "rss_world", "pss_agents", "pss_tree")
+                f"{k} {b[k] / a[k]:.3f}" for k in ("ticks_per_s", "pss_world", "rss_world", "pss_agents", "pss_server", "pss_tree")
                 if a[k]))
         print(f"swarmloc run exited {code}")
     return 0 if code == 0 else 1
