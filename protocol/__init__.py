@@ -16,6 +16,7 @@ from swarmloc.protocol.messages import (
     EpuckAct,
     EpuckSense,
     ErrorReport,
+    Field,
     Join,
     ProtocolError,
     RabMessage,
@@ -24,10 +25,13 @@ from swarmloc.protocol.messages import (
     WorldState,
     decode,
     encode,
+    register_message,
 )
 
 __all__ = [
     "MAX_MESSAGE_BYTES",
+    "Field",
+    "register_message",
     "MAX_RAB_PAYLOAD_BYTES",
     "MESSAGE_TYPES",
     "PROTOCOL_VERSION",

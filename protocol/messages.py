@@ -809,6 +809,92 @@ def tag_of(cls: type) -> str:
 
 
 # --------------------------------------------------------------------------------------------
+# Message types from plugins (issue 48: a family added by a plugin brings its Sense and Act)
+# --------------------------------------------------------------------------------------------
+
+
+class Field:
+    """The field specs a plugin's message type is declared with (:func:`register_message`): the
+    same specs, with the same strict checks and error paths, as the shipped messages' table.
+
+    - ``Field.int(lo, hi)``; ``Field.float(lo=-max, hi=max)`` (finite; an int is converted);
+      ``Field.bool()``;
+    - ``Field.str(min_chars=0, max_chars=256, pattern=None)``;
+      ``Field.bytes(max_len, optional=False)`` (optional: None allowed);
+    - ``Field.floats(length, lo, hi)``: a fixed-length tuple of floats (a pose);
+    - ``Field.tuple(item_spec, max_len, min_len=0)``: a bounded tuple of one spec;
+    - ``Field.message(cls)``: a nested message (registered first, or a shipped one);
+    - ``Field.dict(max_depth=8)``: a plain JSON-like dict.
+    """
+
+    int = staticmethod(lambda lo, hi: _Int(lo, hi))
+    float = staticmethod(lambda lo=-_MAX_FINITE, hi=_MAX_FINITE: _Float(lo, hi))
+    bool = staticmethod(lambda: _Bool())
+    str = staticmethod(lambda min_chars=0, max_chars=MAX_STRING_CHARS, pattern=None:
+                       _Str(min_chars, max_chars, pattern))
+    bytes = staticmethod(lambda max_len, optional=False: _Bytes(max_len, optional))
+    floats = staticmethod(lambda length, lo=-_MAX_FINITE, hi=_MAX_FINITE: _FloatTuple(length, lo, hi))
+    tuple = staticmethod(lambda item, max_len, min_len=0: _Tuple(item, max_len, min_len))
+    message = staticmethod(lambda cls: _Message(cls))
+    dict = staticmethod(lambda max_depth=MAX_DICT_DEPTH: _PlainDict(max_depth))
+
+
+_TAG_RE = re.compile(r"[a-z][a-z0-9_.-]{0,63}")
+#: Where each plugin message type was registered (``file:line``), for a clash's error.
+_ORIGINS: dict[type, str] = {}
+
+
+def register_message(cls: type, tag: str, fields: dict[str, _Spec]) -> type:
+    """Make ``cls`` a protocol message with wire tag ``tag``, validated by ``fields`` (one
+    :class:`Field` spec per dataclass field, in field order): :func:`encode` and :func:`decode`
+    then take it like a shipped message, with the same strictness and error paths.
+
+    ``cls`` must be a frozen slots dataclass without ``__post_init__``
+    (``@dataclass(frozen=True, slots=True)``). Registering the same class again under the same tag
+    is a no-op (a plugin imported twice); a tag or class already taken is a ValueError naming
+    where it was registered. Returns ``cls``.
+    """
+    import sys
+
+    frame = sys._getframe(1)
+    origin = f"{frame.f_code.co_filename}:{frame.f_lineno}"
+    if not isinstance(tag, str) or not _TAG_RE.fullmatch(tag):
+        raise ValueError(f"message tag {tag!r}: expected lower-case letters, digits, '_', '.', '-' "
+                         f"(1-64, a letter first)")
+    if not isinstance(fields, dict) or not all(isinstance(v, _Spec) for v in fields.values()):
+        raise TypeError(f"fields of {getattr(cls, '__name__', cls)!r}: expected a dict of Field specs")
+    known = _CODECS.get(cls)
+    if known is not None:
+        if known.tag == tag:
+            return cls
+        raise ValueError(f"message type {cls.__name__} is already registered as {known.tag!r} "
+                         f"(at {_ORIGINS.get(cls, 'swarmloc.protocol.messages')}); again as {tag!r} at {origin}")
+    if tag in _BY_TAG:
+        other = _BY_TAG[tag].cls
+        raise ValueError(f"message tag {tag!r} is already {other.__name__}'s "
+                         f"(at {_ORIGINS.get(other, 'swarmloc.protocol.messages')}); registered again "
+                         f"for {cls.__name__} at {origin}")
+    for spec in _walk_specs(fields.values()):
+        if isinstance(spec, _Message) and spec.cls not in _CODECS:
+            raise ValueError(f"{cls.__name__}: nested message type {spec.cls.__name__} is not "
+                             f"registered (register it first)")
+    codec = _Codec(cls, tag, fields)
+    _CODECS[cls] = codec
+    _BY_TAG[tag] = codec
+    MESSAGE_TYPES[tag] = cls
+    _ORIGINS[cls] = origin
+    return cls
+
+
+def unregister_message(cls: type) -> None:
+    """Remove a message type :func:`register_message` added (tests; a shipped one stays)."""
+    if cls not in _ORIGINS:
+        raise ValueError(f"{getattr(cls, '__name__', cls)!r} is not a plugin message type")
+    codec = _CODECS.pop(cls)
+    del _BY_TAG[codec.tag], MESSAGE_TYPES[codec.tag], _ORIGINS[cls]
+
+
+# --------------------------------------------------------------------------------------------
 # Codec
 # --------------------------------------------------------------------------------------------
 
