@@ -156,3 +156,37 @@ def scenario_from_dict(data: dict) -> AnyScenario:
     if "family" in getattr(cls, "__dataclass_fields__", {}):
         fields["family"] = family
     return AnyScenario(family, cls.from_dict(fields))
+
+
+def run_in_process(scenario: AnyScenario, ticks: int | None = None) -> dict:
+    """Serve ``scenario`` in this process, each robot answered by the brain an agent process
+    builds from the world's Welcome, every Sense and Act through the protocol codec: what a
+    lockstep run of processes computes, without the transport. Returns the world's ``summary()``.
+
+    For a family without an in-process engine of its own (a plugin family's experiment hooks
+    call it); the shipped families have faster engines (the batch engine, the laser and replay
+    runners), which their tests hold equal to their processes.
+    """
+    from swarmloc.agents.brains import brain_from_welcome
+    from swarmloc.protocol.errors import ErrorCounter
+    from swarmloc.protocol.messages import Welcome, decode, encode
+    from swarmloc.world.service import served_world
+
+    world = served_world(scenario)
+    plain = scenario.to_dict()
+    brains = [brain_from_welcome(Welcome(robot_id=r, run="in-process", seed=scenario.seed, scenario=plain))
+              for r in range(world.n_robots)]
+    errors = ErrorCounter()
+    limit = scenario.n_ticks if ticks is None else ticks
+    for _ in range(limit):
+        if world.done:
+            break
+        acts: list = [None] * world.n_robots
+        for r, data in world.senses():
+            brain = brains[r]
+            sense = decode(data, brain.sense_type)
+            if getattr(sense, "final", False):
+                continue  # as an agent node: a final Sense ends the agent, unanswered
+            acts[r] = decode(encode(brain.act(sense, errors)), world.act_type)
+        world.step(acts)
+    return world.summary()
