@@ -10,24 +10,20 @@ starts.
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 
-from swarmloc.agents.epuck.foraging import AgentConfig
 from swarmloc.config import (
     ConfigError,
     apply_overrides,
     did_you_mean,
-    from_dict,
     load_toml,
-    to_dict,
 )
 
 # AnyScenario, family_of and scenario_from_dict live with the Family registry (swarmloc/families.py),
 # below deploy/: an agent process builds its brain from the world's scenario without this module.
 from swarmloc.families import AnyScenario, family_of, scenario_from_dict
-from swarmloc.world.epuck.foraging import WorldConfig
+from swarmloc.world.epuck.scenario import Scenario
 
 DEFAULT_SCENARIO = "ES1"
 
@@ -85,39 +81,6 @@ def variant_overrides(name: str | None) -> list[str]:
     if name not in VARIANTS:
         raise ConfigError(f"variant '{name}': no such variant (known: {', '.join(sorted(VARIANTS))})")
     return list(VARIANTS[name])
-
-
-@dataclass(frozen=True)
-class Scenario:
-    """An e-puck foraging scenario (family ``"foraging"``; other families have their own)."""
-
-    name: str = "custom"
-    description: str = ""
-    family: str = "foraging"
-    world: WorldConfig = field(default_factory=WorldConfig)
-    agent: AgentConfig = field(default_factory=AgentConfig)
-
-    def __post_init__(self) -> None:
-        if self.family != "foraging":
-            raise ConfigError(f"family: {self.family!r} is not an e-puck foraging scenario")
-
-    @property
-    def n_ticks(self) -> int:
-        """Ticks of a run (``swarmloc.families.Family``'s scenario contract)."""
-        return self.world.n_ticks
-
-    @property
-    def label(self) -> str:
-        """What tells runs of this scenario apart: the strategy."""
-        return self.agent.strategy
-
-    def to_dict(self) -> dict:
-        return to_dict(self)
-
-    @classmethod
-    def from_dict(cls, data: dict) -> Scenario:
-        return from_dict(cls, data)
-
 
 
 def _shipped() -> dict[str, tuple[str, Path]]:

@@ -70,7 +70,7 @@ def needs_kernels(family: str | None) -> bool:
 FAMILIES: Registry[Family] = Registry("robot family")
 
 FAMILIES.register("foraging", Family(
-    scenario="swarmloc.deploy.scenario:Scenario",
+    scenario="swarmloc.world.epuck.scenario:Scenario",
     world="swarmloc.world.epuck.service:_foraging",
     brain="swarmloc.agents.epuck.agent:ForagingAgent.from_welcome",
     flags={"robots": "world.robots", "strategy": "agent.strategy", "beta": "agent.beta",
@@ -79,7 +79,7 @@ FAMILIES.register("foraging", Family(
     experiment="swarmloc.deploy.lab.epuck.experiment", report="swarmloc.deploy.lab.epuck.report:TEMPLATE"))
 FAMILIES.alias("epuck", "foraging")
 FAMILIES.register("laser", Family(
-    scenario="swarmloc.deploy.lab.laser.runner:LaserScenario",
+    scenario="swarmloc.world.laser.scenario:LaserScenario",
     world="swarmloc.world.laser.service:LaserService",
     brain="swarmloc.agents.laser.agent:LaserAgent.from_welcome",
     flags={"robots": "world.robots", "seed": "world.seed", "algorithm": "algorithm.name"},

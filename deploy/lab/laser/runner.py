@@ -54,16 +54,13 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import functools
-import hashlib
 import json
 import math
 import sys
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
-from importlib import resources
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -78,111 +75,33 @@ from swarmloc.agents.laser.registry import (
 from swarmloc.config import (
     ConfigError,
     apply_overrides,
-    did_you_mean,
-    from_dict,
-    load_toml,
-    to_dict,
 )
 from swarmloc.world.laser.maps import MAPS, SegmentMap
+
+# The scenario classes live with the family (world/laser/scenario.py); the runner's names stay
+# for the modules and notebooks that import them from here.
+from swarmloc.world.laser.scenario import AlgorithmConfig, LaserScenario
 from swarmloc.world.laser.scoring import MetricsConfig, pose_errors, summarize
-from swarmloc.world.laser.world import WORLD_STREAM, LaserWorld, LaserWorldConfig
-
-# -- algorithms -------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class AlgorithmConfig:
-    """Which localizer every robot runs. ``population`` sets the algorithm's population
-    parameter(s) (GA individuals; AMCL: min and max particles alike); ``params`` are the
-    algorithm's own parameters (see its module)."""
-
-    name: str = "cfsga"
-    cooperative: bool = True
-    population: int | None = None
-    params: Any = None
-
-    def __post_init__(self) -> None:
-        entry = ALGORITHMS.get(self.name)
-        if self.population is not None and (isinstance(self.population, bool)
-                                            or not isinstance(self.population, int)
-                                            or self.population < 1):
-            raise ValueError(f"population: must be an integer >= 1, got {self.population!r}")
-        if self.params is None:
-            object.__setattr__(self, "params", {})
-        if not isinstance(self.params, dict):
-            raise TypeError(f"params: expected a table of the algorithm's parameters, "
-                             f"got {self.params!r}")
-        entry.check(entry.params(self.population, self.params))
-
-    @property
-    def entry(self) -> AlgorithmEntry:
-        return ALGORITHMS.get(self.name)
-
-    def resolved_params(self) -> dict:
-        return self.entry.params(self.population, self.params)
-
-
-@dataclass(frozen=True)
-class LaserScenario:
-    name: str = "custom"
-    description: str = ""
-    world: LaserWorldConfig = field(default_factory=LaserWorldConfig)
-    algorithm: AlgorithmConfig = field(default_factory=AlgorithmConfig)
-    metrics: MetricsConfig = field(default_factory=MetricsConfig)
-
-    def to_dict(self) -> dict:
-        return to_dict(self)
-
-    @property
-    def n_ticks(self) -> int:
-        """Steps of a run (``swarmloc.families.Family``'s scenario contract)."""
-        return self.world.steps
-
-    @property
-    def label(self) -> str:
-        """What tells runs of this scenario apart: the localizer."""
-        return self.algorithm.name
-
-    @classmethod
-    def from_dict(cls, data: dict) -> LaserScenario:
-        return from_dict(cls, data)
-
-    def config_hash(self) -> str:
-        """Hash of the scenario without its seed: rows made with another configuration differ."""
-        data = self.to_dict()
-        data["world"].pop("seed", None)
-        blob = json.dumps(data, sort_keys=True, separators=(",", ":")).encode()
-        return hashlib.sha256(blob).hexdigest()[:12]
-
-
-def _scenarios_folder():
-    return resources.files("swarmloc.deploy") / "scenarios" / "laser"
+from swarmloc.world.laser.world import WORLD_STREAM, LaserWorld
 
 
 def laser_scenario_names() -> list[str]:
     """The shipped laser scenarios (``deploy/scenarios/laser/*.toml``)."""
-    folder = _scenarios_folder()
-    return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml"))
+    from swarmloc.deploy.scenario import builtin_names
+
+    return builtin_names("laser")
 
 
 def load_laser_scenario(name_or_path: str | Path, overrides: list[str] = ()) -> LaserScenario:
     """Load and validate a laser scenario (a shipped name, or a .toml/.json path), with
-    ``section.key=value`` overrides applied. Errors are ConfigError naming the key."""
-    path = Path(name_or_path)
-    if path.suffix == ".json":
-        try:
-            data = json.loads(path.read_text())
-        except (OSError, ValueError) as exc:
-            raise ConfigError(f"{path}: cannot read scenario: {exc}") from None
-    elif path.suffix == ".toml" or path.exists():
-        data = load_toml(path)
-    else:
-        names = laser_scenario_names()
-        if str(name_or_path) not in names:
-            hint = did_you_mean(str(name_or_path), names, 0.4)
-            raise ConfigError(f"laser scenario '{name_or_path}': no such file or shipped scenario"
-                              f"{hint} (shipped: {', '.join(names)})")
-        data = load_toml(Path(str(_scenarios_folder() / f"{name_or_path}.toml")))
+    ``section.key=value`` overrides applied, through the one scenario loader
+    (:func:`swarmloc.deploy.scenario.scenario_data`). Errors are ConfigError naming the key."""
+    from swarmloc.deploy.scenario import scenario_data
+
+    data = scenario_data(str(name_or_path))
+    family = data.pop("family", "laser")
+    if family != "laser":
+        raise ConfigError(f"laser scenario '{name_or_path}': a {family} scenario, not a laser one")
     data = apply_overrides(data, list(overrides))
     try:
         return LaserScenario.from_dict(data)
