@@ -242,15 +242,31 @@ def test_groundtruth_ending_early_and_gaps(folder):
     assert np.isfinite(truth[world.tick_end_times_s > 20.0, 1]).all()
 
 
-def test_unsorted_rows_lf_endings_and_blank_lines_are_accepted(folder, synthetic):
+def test_lf_endings_and_blank_lines_are_accepted(folder, synthetic):
     path = folder / "Robot2_Odometry.dat"
+    before = load_dataset(folder).robots[2].odometry_time_s
     lines = _lines(path)
     header, body = lines[:4], [ln for ln in lines[4:] if ln]
-    body[5], body[6] = body[6], body[5]  # two rows out of order
     path.write_bytes(("\n".join(header + body[:10] + ["", "   "] + body[10:]) + "\n").encode())
     rec = load_dataset(folder).robots[2]
-    assert np.all(np.diff(rec.odometry_time_s) >= 0)
+    assert np.array_equal(rec.odometry_time_s, before)
     assert rec.odometry_time_s.size == synthetic.robots[2].odometry_time_s.size
+
+
+@pytest.mark.parametrize("kind", ["Odometry", "Groundtruth", "Measurement"])
+def test_a_stamp_that_goes_back_is_refused_naming_file_and_line(folder, kind):
+    path = folder / f"Robot2_{kind}.dat"
+    lines = _lines(path)
+    header, body = lines[:4], [ln for ln in lines[4:] if ln]
+    t5, t6 = float(body[5].split()[0]), float(body[6].split()[0])
+    assert t6 > t5  # the synthetic set's stamps rise here
+    body[5], body[6] = body[6], body[5]
+    # a blank line after the header: the line named is the file's, not the data row's
+    path.write_bytes(("\n".join(header + [""] + body) + "\n").encode())
+    # header (4 lines) + blank (1) + data rows 0..6: the swapped-in earlier stamp is on line 12
+    with pytest.raises(MrclamFormatError, match=rf"Robot2_{kind}\.dat line 12: time {t5!r} goes back "
+                                                rf"from {t6!r} \(line 11\)"):
+        load_dataset(folder)
 
 
 def test_several_readings_per_frame_are_kept(folder, synthetic):

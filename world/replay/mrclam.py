@@ -21,7 +21,9 @@ known quirks (see ``../shared/data/mrclam/SOURCE.md``):
 - measurements of barcodes that are not in ``Barcodes.dat`` (camera misreads): dropped and
   counted per robot (:attr:`RobotRecord.unknown_barcodes`);
 - several measurements with one timestamp (one camera frame sees several barcodes): kept;
-- rows out of time order: sorted (stable) by time;
+- rows out of time order: refused, naming the file and the line (issue 46: a stamp that goes
+  back is a logging fault, and sorting it away hid which row was wrong; Dataset 6 has none, its
+  equal stamps are several readings of one camera frame and are kept);
 - ground truth that ends early (Dataset 6 robot 1 stops at +771.9 s) or has gaps (robot 4 has a
   2 s gap): :meth:`RobotRecord.pose_at` returns NaN where no ground truth brackets a time within
   ``max_gap_s``, so that evaluation skips those instants instead of inventing a pose.
@@ -254,9 +256,17 @@ def _integer_column(table: np.ndarray, column: int, path: Path, what: str) -> np
     return values.astype(np.int64)
 
 
-def _sorted_by_time(table: np.ndarray) -> np.ndarray:
-    if table.shape[0] > 1 and np.any(np.diff(table[:, 0]) < 0):
-        table = table[np.argsort(table[:, 0], kind="stable")]
+def _in_time_order(table: np.ndarray, path: Path) -> np.ndarray:
+    """``table`` if its times never go back, else MrclamFormatError naming the file, the line
+    and both stamps (equal stamps are fine: one camera frame, several readings)."""
+    back = np.flatnonzero(np.diff(table[:, 0]) < 0) if table.shape[0] > 1 else ()
+    if len(back):
+        row = int(back[0]) + 1  # the data row (0-based) whose stamp is earlier than the one before
+        lines = [n for n, ln in enumerate(path.read_text(encoding="ascii").splitlines(), start=1)
+                 if ln.strip() and not ln.lstrip().startswith("#")]
+        raise MrclamFormatError(
+            f"{path.name} line {lines[row]}: time {float(table[row, 0])!r} goes back from {float(table[row - 1, 0])!r} "
+            f"(line {lines[row - 1]}): stamps must not decrease")
     return table
 
 
@@ -330,12 +340,11 @@ def load_dataset(folder: str | Path, name: str | None = None) -> MrclamDataset:
     raw: dict[int, dict[str, np.ndarray]] = {}
     for robot_id in sorted(robot_files):
         raw[robot_id] = {
-            "gt": _sorted_by_time(_read_table(folder / f"Robot{robot_id}_Groundtruth.dat", 4,
-                                              "time, x, y, orientation")),
-            "odo": _sorted_by_time(_read_table(folder / f"Robot{robot_id}_Odometry.dat", 3,
-                                               "time, forward velocity, angular velocity")),
-            "meas": _sorted_by_time(_read_table(folder / f"Robot{robot_id}_Measurement.dat", 4,
-                                                "time, barcode, range, bearing")),
+            kind: _in_time_order(_read_table(folder / f"Robot{robot_id}_{name}.dat", n, what),
+                                 folder / f"Robot{robot_id}_{name}.dat")
+            for kind, name, n, what in (("gt", "Groundtruth", 4, "time, x, y, orientation"),
+                                        ("odo", "Odometry", 3, "time, forward velocity, angular velocity"),
+                                        ("meas", "Measurement", 4, "time, barcode, range, bearing"))
         }
         if raw[robot_id]["gt"].shape[0] == 0:
             raise MrclamFormatError(
