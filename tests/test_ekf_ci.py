@@ -103,3 +103,34 @@ def test_the_ekf_alone_is_consistent_on_data_drawn_from_its_own_model(synthetic)
     tight = replace(SYNTH_CAMERA, range_std_m=SYNTH_CAMERA.range_std_m / 10, bearing_std_rad=SYNTH_CAMERA.bearing_std_rad / 10)
     over = consistency(run_replay(synthetic, synthetic_config(algorithm="ekf", camera=tight)))
     assert all(s["position_nees_mean"] > 4.0 for s in over.values()), over
+
+
+def test_heading_nees_by_hand_and_in_its_band_on_a_linear_gaussian_case():
+    from swarmloc.deploy.lab.replay.mrclam import ReplayResult
+    from swarmloc.world.replay.evaluation import CHI2_1DOF_95, heading_nees
+
+    # by hand: the error is wrapped (3.1 against -3.1 is 0.0832 rad off, not 6.2)
+    cfg = ReplayConfig()
+    est, truth = np.zeros((2, 1, 3)), np.zeros((2, 1, 3))
+    est[0, 0, 2], truth[0, 0, 2] = 3.1, -3.1
+    var = np.array([[0.01], [np.nan]])
+    nees = heading_nees(ReplayResult(cfg, (1,), np.array([0.02, 0.04]), est, truth, 0.0, heading_variance=var))
+    assert nees[0, 0] == pytest.approx((2 * np.pi - 6.2) ** 2 / 0.01) and np.isnan(nees[1, 0])
+
+    # a consistent heading estimate (errors drawn from the variance it states): mean NEES 1 and
+    # 95 % inside the 1-dof bound, within 4 standard errors of 20,000 independent samples; the
+    # same errors with a variance stated 4x too small (overconfident) fall outside both
+    rng = np.random.default_rng(5)
+    n = 20_000
+    var_rad2 = rng.uniform(0.001, 0.05, (n, 1))
+    truth = np.zeros((n, 1, 3))
+    truth[:, 0, 2] = rng.uniform(-np.pi, np.pi, n)
+    est = truth.copy()
+    est[:, 0, 2] += rng.normal(0.0, np.sqrt(var_rad2[:, 0]))
+    for stated, consistent in ((var_rad2, True), (var_rad2 / 4, False)):
+        result = ReplayResult(cfg, (1,), np.arange(n) * 0.02, est, truth, 0.0, heading_variance=stated)
+        c = consistency(result)[1]
+        inside = c["heading_nees_in_95"]
+        assert bool(abs(c["heading_nees_mean"] - 1.0) < 4 * np.sqrt(2 / n)) is consistent, c
+        assert bool(abs(inside - 0.95) < 4 * np.sqrt(0.95 * 0.05 / n)) is consistent, c
+        assert np.mean(heading_nees(result) <= CHI2_1DOF_95) == inside

@@ -11,6 +11,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 import json
+import math
 import textwrap
 
 import numpy as np
@@ -277,7 +278,13 @@ algorithm = "pf"
 
 
 def test_replay_spec_runs_resumes_and_equals_direct_runs(tmp_path, synthetic_folder):
-    from swarmloc.deploy.lab.replay.mrclam import ReplayConfig, run_replay, score
+    from swarmloc.deploy.lab.replay.mrclam import (
+        ReplayConfig,
+        consistency,
+        run_replay,
+        score,
+        trajectory_errors,
+    )
     from swarmloc.world.replay.mrclam import load_dataset
 
     spec = with_overrides(load_spec(write_spec(tmp_path, REPLAY_TINY)),
@@ -296,12 +303,23 @@ def test_replay_spec_runs_resumes_and_equals_direct_runs(tmp_path, synthetic_fol
                                            for r in rows}:
         config = ReplayConfig(algorithm=algorithm, cooperative=cooperative == "True",
                               seed=int(seed), duration_s=6.0)
-        expected = score(run_replay(dataset, config))
+        result = run_replay(dataset, config)
+        expected = score(result)
+        consistent, trajectories = consistency(result), trajectory_errors(result)
         for r in rows:
             if (r["algorithm"], r["cooperative"], r["seed"]) != (algorithm, cooperative, seed):
                 continue
+            rid = int(r["robot"])
             for key in ("position_rmse_m", "heading_rmse_rad", "final_error_m", "scored_ticks"):
-                assert float(r[key]) == expected[int(r["robot"])][key], (r["setting"], key)
+                assert float(r[key]) == expected[rid][key], (r["setting"], key)
+            # issue 46's columns: NEES of position and heading, evo's APE/RPE (NIS: NaN, the
+            # EKF and the PF keep no NIS tally)
+            for key in ("position_nees_mean", "heading_nees_mean", "heading_nees_in_95"):
+                assert float(r[key]) == pytest.approx(consistent[rid][key], nan_ok=True), key
+            assert float(r["ape_rmse_m"]) == pytest.approx(trajectories[rid]["ape_rmse_m"])
+            assert math.isnan(float(r["landmark_nis_mean"]))
+            if algorithm == "ekf":
+                assert 0.0 < float(r["heading_nees_mean"]) < 100.0
     # The report: replay template from the columns; its tables and one plot per configuration.
     assert results_family([out]) == "replay"
     report = tmp_path / "report"

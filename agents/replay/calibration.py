@@ -310,6 +310,11 @@ class SelfCalibratingLocalizer:
         inner = getattr(self.inner, "covariance_xy", None)
         return inner() if inner is not None else None
 
+    def heading_variance(self):
+        """The wrapped localizer's heading variance, if it gives one."""
+        inner = getattr(self.inner, "heading_variance", None)
+        return inner() if inner is not None else None
+
     @property
     def rejected(self):
         return getattr(self.inner, "rejected", ())

@@ -706,6 +706,13 @@ class _ColoBase:
             return None
         return self._view.cov3(self._own())[:2, :2]
 
+    def heading_variance(self) -> float | None:
+        """The heading's variance when the heading is estimated (None in CoLo-AT's setting,
+        where the true heading is given and the state is x, y)."""
+        if self._view is None or self._view.d != 3:
+            return None
+        return float(self._view.cov3(self._own())[2, 2])
+
     def outgoing(self) -> bytes | None:
         return self._out
 

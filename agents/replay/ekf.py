@@ -451,6 +451,10 @@ class EkfLocalizer:
         """The estimate's position covariance (2 x 2): what the consistency scores read."""
         return self.covariance[:2, :2].copy()
 
+    def heading_variance(self) -> float:
+        """The heading's variance [rad^2]: the heading NEES reads it (issue 46)."""
+        return float(self.covariance[2, 2])
+
     @property
     def odometry_calibration(self) -> tuple[tuple[float, float, float], ...]:
         """The estimated ``(k_v, k_w, b_w)`` of each command class (``((1, 1, 0),)`` when not

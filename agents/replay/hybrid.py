@@ -407,5 +407,9 @@ class HybridLocalizer:
         Gaussian)."""
         return None if self.phase == SEARCH or self.ekf is None else self.ekf.covariance_xy()
 
+    def heading_variance(self) -> float | None:
+        """The tracking EKF's heading variance while it tracks; None while the search runs."""
+        return None if self.phase == SEARCH or self.ekf is None else self.ekf.heading_variance()
+
     def outgoing(self) -> bytes | None:
         return self._out

@@ -175,6 +175,9 @@ class ReplayResult:
     #: Per robot, the NIS of its landmark and teammate updates, for localizers that count it
     #: (``nis_scores()``: CoLo's estimators, ``agents/replay/colo.py``); empty otherwise.
     nis: Mapping[int, Mapping[str, float]] = field(default_factory=dict)
+    #: (T, N) each estimate's heading variance [rad^2], NaN where the localizer gives none
+    #: (``heading_variance()``; issue 46's heading NEES).
+    heading_variance: np.ndarray | None = None
 
     def position_error_m(self) -> np.ndarray:
         """(T, N) distance between estimate and truth (NaN where no truth)."""
@@ -319,6 +322,7 @@ def run_replay(dataset: MrclamDataset, config: ReplayConfig) -> ReplayResult:
     n = len(world.robot_ids)
     estimates = np.empty((world.n_ticks, n, 3))
     covariance = np.full((world.n_ticks, n, 2, 2), np.nan)
+    heading_var = np.full((world.n_ticks, n), np.nan)
     rejected = 0
     t0 = time.process_time()
     while not world.done:
@@ -331,6 +335,9 @@ def run_replay(dataset: MrclamDataset, config: ReplayConfig) -> ReplayResult:
             cov_xy = getattr(brain, "covariance_xy", None)
             if cov_xy is not None and (c := cov_xy()) is not None:
                 covariance[k, i] = c
+            var_h = getattr(brain, "heading_variance", None)
+            if var_h is not None and (v := var_h()) is not None:
+                heading_var[k, i] = v
             outgoing[obs.robot_id] = brain.outgoing()
             rejected += len(getattr(brain, "rejected", ()))
         world.step(outgoing)
@@ -341,7 +348,8 @@ def run_replay(dataset: MrclamDataset, config: ReplayConfig) -> ReplayResult:
         if nis_scores is not None:
             nis[rid] = nis_scores()
     return ReplayResult(config, world.robot_ids, world.tick_end_times_s.copy(), estimates,
-                        world.ground_truth(), cpu, rejected, world.kidnap_tick, covariance, nis)
+                        world.ground_truth(), cpu, rejected, world.kidnap_tick, covariance, nis,
+                        heading_var)
 
 
 def rmse_at_truth_stamps(result: ReplayResult, dataset: MrclamDataset) -> dict[int, float]:
@@ -479,20 +487,39 @@ def consistency(result: ReplayResult) -> dict[int, dict[str, float]]:
     CoLo-AT plots); NaN without a covariance. Apart from :func:`score`, whose figures the process
     path reproduces (an agent process reports its estimate, not its covariance)."""
     nees = position_nees(result)
+    nees_h = heading_nees(result)
     out = {}
     for i, rid in enumerate(result.robot_ids):
         ok = np.isfinite(nees[:, i])
         v = nees[ok, i]
+        h = nees_h[np.isfinite(nees_h[:, i]), i]
         trace = (np.trace(result.covariance_xy[ok, i], axis1=-2, axis2=-1)
                  if v.size and result.covariance_xy is not None else np.zeros(0))
         out[rid] = {"position_nees_mean": float(np.mean(v)) if v.size else math.nan,
                     "position_nees_in_95": float(np.mean(v <= CHI2_2DOF_95)) if v.size else math.nan,
-                    "position_cov_trace_m2": float(np.mean(trace)) if trace.size else math.nan}
+                    "position_cov_trace_m2": float(np.mean(trace)) if trace.size else math.nan,
+                    "heading_nees_mean": float(np.mean(h)) if h.size else math.nan,
+                    "heading_nees_in_95": float(np.mean(h <= CHI2_1DOF_95)) if h.size else math.nan}
     return out
 
 
 #: chi-square 95 % quantile, 2 degrees of freedom.
 CHI2_2DOF_95 = 5.991464547107979
+#: chi-square 95 % quantile, 1 degree of freedom (the heading alone).
+CHI2_1DOF_95 = 3.841458820694124
+
+
+def heading_nees(result: ReplayResult) -> np.ndarray:
+    """(T, N) each tick's heading NEES ``e^2 / var`` with ``e`` the wrapped heading error (NaN
+    without a heading variance or truth)."""
+    out = np.full(result.estimates.shape[:2], np.nan)
+    if result.heading_variance is None:
+        return out
+    e = np.angle(np.exp(1j * (result.estimates[..., 2] - result.truth[..., 2])))
+    var = result.heading_variance
+    have = np.isfinite(e) & np.isfinite(var) & (var > 0)
+    out[have] = e[have] ** 2 / var[have]
+    return out
 
 
 def position_nees(result: ReplayResult) -> np.ndarray:

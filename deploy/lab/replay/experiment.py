@@ -13,7 +13,10 @@ against the Vicon ground truth (:func:`~swarmloc.deploy.lab.replay.mrclam.score`
 scenario, dataset, algorithm, cooperative, dt_s, seed, replication, one column per grid key), the
 robot and its scores (with the time until localized, the RMSE after and a kidnap's recovery
 time; the position NEES's mean and share inside the chi-square 95 % band and the mean trace of
-the position covariance, NaN for localizers without one, issue 46), cpu_s (the replay loop), wall_s and config_hash.
+the position covariance, the heading NEES's mean and share (one degree of freedom), the NIS of
+the landmark and teammate updates (mean, share inside the band), each NaN for localizers without
+a covariance or a NIS tally, and evo's APE and RPE (translation, RMSE); issue 46), cpu_s (the
+replay loop), wall_s and config_hash.
 
 The data set is not part of the repository: ``dataset`` is a folder (relative to the working
 directory), ``../shared/data/mrclam/MRCLAM_Dataset6`` in the shipped scenario and spec; elsewhere
@@ -39,8 +42,13 @@ LEAD_COLUMNS = ("experiment", "group", "setting", "scenario", "dataset", "algori
                 "cooperative", "calibration", "start", "kidnap_s", "dt_s", "seed", "replication")
 METRIC_COLUMNS = ("robot", "position_rmse_m", "heading_rmse_rad", "final_error_m",
                   "scored_ticks", "localized_s", "rmse_localized_m", "recovery_s",
-                  "position_nees_mean", "position_nees_in_95", "position_cov_trace_m2", "cpu_s",
-                  "wall_s", "config_hash")
+                  "position_nees_mean", "position_nees_in_95", "position_cov_trace_m2",
+                  "heading_nees_mean", "heading_nees_in_95", "landmark_nis_mean",
+                  "landmark_nis_in_95", "teammate_nis_mean", "teammate_nis_in_95", "ape_rmse_m",
+                  "rpe_rmse_m", "cpu_s", "wall_s", "config_hash")
+#: NIS columns of localizers that tally none (NaN: not measured, not zero).
+_NO_NIS = {f"{kind}_nis_{stat}": float("nan") for kind in ("landmark", "teammate")
+           for stat in ("mean", "in_95")}
 #: What a job reports of its configuration (the lead columns it fills).
 _CONFIG_COLUMNS = ("dataset", "algorithm", "cooperative", "calibration", "start", "kidnap_s",
                    "dt_s")
@@ -118,17 +126,20 @@ def _dataset(folder: str):
 
 def run_job(job: Job) -> dict:
     """One replay of a setting, scored per robot."""
-    from swarmloc.deploy.lab.replay.mrclam import consistency, run_replay, score
+    from swarmloc.deploy.lab.replay.mrclam import consistency, run_replay, score, trajectory_errors
 
     t0 = time.perf_counter()
     scenario = load_replay_scenario(job.scenario, list(job.overrides))
     dataset = _dataset(str(Path(scenario.dataset).resolve()))
     config = scenario.config()
     result = run_replay(dataset, config)
+    consistent, trajectories = consistency(result), trajectory_errors(result)
     return {"dataset": dataset.name, "algorithm": config.algorithm,
             "cooperative": config.cooperative, "calibration": config.calibration,
             "start": config.start, "kidnap_s": config.kidnap_s, "dt_s": config.dt_s,
-            "scores": {int(rid): {**sc, **consistency(result)[rid]}
+            "scores": {int(rid): {**sc, **consistent[rid], **_NO_NIS,
+                                  **{k: v for k, v in result.nis.get(rid, {}).items() if k in _NO_NIS},
+                                  **trajectories[rid]}
                        for rid, sc in score(result).items()},
             "cpu_s": round(result.cpu_s, 1), "wall_s": round(time.perf_counter() - t0, 3)}
 

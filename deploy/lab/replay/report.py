@@ -32,9 +32,15 @@ from swarmloc.deploy.lab.replay.mrclam import (
 RESULT_COLUMNS = ("dataset", "algorithm", "cooperative", "calibration", "start", "kidnap_s",
                   "seed", "dt_s", "robot", "position_rmse_m", "heading_rmse_rad", "final_error_m",
                   "scored_ticks", "localized_s", "rmse_localized_m", "recovery_s",
-                  "position_nees_mean", "position_nees_in_95", "position_cov_trace_m2", "cpu_s")
-#: Consistency columns (issue 46): absent from results files written before them.
-_CONSISTENCY = ("position_nees_mean", "position_nees_in_95", "position_cov_trace_m2")
+                  "position_nees_mean", "position_nees_in_95", "position_cov_trace_m2",
+                  "heading_nees_mean", "heading_nees_in_95", "landmark_nis_mean",
+                  "landmark_nis_in_95", "teammate_nis_mean", "teammate_nis_in_95", "ape_rmse_m",
+                  "rpe_rmse_m", "cpu_s")
+#: Consistency and trajectory columns (issue 46): absent from results files written before them.
+_CONSISTENCY = ("position_nees_mean", "position_nees_in_95", "position_cov_trace_m2",
+                "heading_nees_mean", "heading_nees_in_95", "landmark_nis_mean",
+                "landmark_nis_in_95", "teammate_nis_mean", "teammate_nis_in_95", "ape_rmse_m",
+                "rpe_rmse_m")
 _INT = frozenset({"seed", "replication", "robot", "scored_ticks"})
 _FLOAT = frozenset({"dt_s", "position_rmse_m", "heading_rmse_rad", "final_error_m", "cpu_s",
                     "wall_s", "kidnap_s", "localized_s", "rmse_localized_m", "recovery_s",
@@ -260,6 +266,31 @@ def write_report(rows: list[dict], out_dir: str | Path, replay_first=None,
                      format_table(consistent, robot_ids, "position_nees_mean", "{:.1f}"), "",
                      "Share of ticks with the position NEES inside the 95 % band", "",
                      format_table(consistent, robot_ids, "position_nees_in_95", "{:.2f}"), ""]
+            heading = [(label, sc) for label, sc in consistent
+                       if any(math.isfinite(v["heading_nees_mean"]) for v in sc.values())]
+            if heading:
+                text += [("Heading NEES (one degree of freedom: 1 for a consistent filter), mean "
+                          "over the scored ticks, and the share inside the chi-square 95 % band "
+                          "(0.95 if consistent); the localizers that estimate the heading."), "",
+                         "Heading NEES mean", "",
+                         format_table(heading, robot_ids, "heading_nees_mean", "{:.1f}"), "",
+                         "Share of ticks with the heading NEES inside the 95 % band", "",
+                         format_table(heading, robot_ids, "heading_nees_in_95", "{:.2f}"), ""]
+        for kind in ("landmark", "teammate"):
+            tallied = [(label, sc) for label, sc in tracking
+                       if any(math.isfinite(v[f"{kind}_nis_mean"]) for v in sc.values())]
+            if tallied:
+                text += [(f"NIS of the {kind} updates (2 degrees of freedom: 2 if the filter's "
+                          "innovations are as large as it expects), mean over the updates, and the "
+                          "share inside the chi-square 95 % band; the localizers that tally it "
+                          "(CoLo's)."), "", f"{kind.capitalize()} NIS mean", "",
+                         format_table(tallied, robot_ids, f"{kind}_nis_mean", "{:.2f}"), ""]
+        if any(math.isfinite(v["ape_rmse_m"]) for _, sc in tracking for v in sc.values()):
+            text += [("evo's absolute and relative trajectory errors (translation, RMSE, no "
+                      "alignment: the estimates are in the landmarks' frame; RPE over 1 m of "
+                      "travel)."), "", "APE RMSE [m]", "",
+                     format_table(tracking, robot_ids, "ape_rmse_m"), "", "RPE RMSE [m] per 1 m", "",
+                     format_table(tracking, robot_ids, "rpe_rmse_m"), ""]
     if global_groups:
         for name in datasets:
             if datasets_by_name and name in datasets_by_name:
