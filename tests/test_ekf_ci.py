@@ -96,13 +96,21 @@ def test_the_ekf_alone_is_consistent_on_data_drawn_from_its_own_model(synthetic)
     for s in consistency(result).values():
         assert 0.5 < s["position_nees_mean"] < 4.0, s
         assert s["position_nees_in_95"] > 0.9, s
+    # its landmark innovations are as large as it expects: NIS about 2 (2 dof), 95 % inside the
+    # band, over hundreds of readings per robot
+    for nis in result.nis.values():
+        assert nis["landmark_nis_count"] > 100, nis
+        assert 1.0 < nis["landmark_nis_mean"] < 3.0 and nis["landmark_nis_in_95"] > 0.85, nis
     # a filter told its readings are 10x better than they are is overconfident, and it shows
     from dataclasses import replace
 
     from mrclam_synthetic import SYNTH_CAMERA
     tight = replace(SYNTH_CAMERA, range_std_m=SYNTH_CAMERA.range_std_m / 10, bearing_std_rad=SYNTH_CAMERA.bearing_std_rad / 10)
-    over = consistency(run_replay(synthetic, synthetic_config(algorithm="ekf", camera=tight)))
+    over_result = run_replay(synthetic, synthetic_config(algorithm="ekf", camera=tight))
+    over = consistency(over_result)
     assert all(s["position_nees_mean"] > 4.0 for s in over.values()), over
+    # ... and in its innovations: readings 10x noisier than it believes (NIS ~ 100x)
+    assert all(n["landmark_nis_mean"] > 20.0 for n in over_result.nis.values()), over_result.nis
 
 
 def test_heading_nees_by_hand_and_in_its_band_on_a_linear_gaussian_case():

@@ -114,7 +114,7 @@ from dataclasses import dataclass
 import msgpack
 import numpy as np
 
-from swarmloc.agents.replay.ekf import CHI2_2DOF_999
+from swarmloc.agents.replay.ekf import CHI2_2DOF_999, NisTally
 from swarmloc.agents.replay.localizers import (
     MAX_REPORT_SIGHTINGS,
     LandmarkSetup,
@@ -359,33 +359,6 @@ def relative_model(joint: Joint, i: int, j: int | None, target_xy: np.ndarray | 
 def _wrap_headings(joint: Joint) -> None:
     if joint.d == 3:
         joint.x[2::3] = wrap_angle(joint.x[2::3])
-
-
-#: chi-square 95 % quantile, 2 degrees of freedom (a reading's NIS band).
-CHI2_2DOF_95 = 5.991464547107979
-
-
-@dataclass
-class NisTally:
-    """The normalized innovation squared ``nu^T S^-1 nu`` of a kind of update (2 degrees of
-    freedom: 2 on average for a consistent filter, inside :data:`CHI2_2DOF_95` 95 % of the time;
-    for a CI fusion, of the fix against ``P + R``, which assumes no correlation), every reading
-    counted, gated out or not."""
-
-    count: int = 0
-    total: float = 0.0
-    inside_95: int = 0
-
-    def add(self, value: float) -> None:
-        self.count += 1
-        self.total += value
-        self.inside_95 += int(value <= CHI2_2DOF_95)
-
-    def scores(self, kind: str) -> dict[str, float]:
-        n = self.count
-        return {f"{kind}_nis_mean": self.total / n if n else math.nan,
-                f"{kind}_nis_in_95": self.inside_95 / n if n else math.nan,
-                f"{kind}_nis_count": float(n)}
 
 
 def _gated(d2: float, gate_chi2: float, nis: NisTally | None) -> bool:

@@ -133,6 +133,34 @@ from swarmloc.world.replay.replay import LandmarkObservation
 
 #: chi-square quantile, 2 degrees of freedom, 99.9 %.
 CHI2_2DOF_999 = 13.815510557964274
+
+#: chi-square 95 % quantile, 2 degrees of freedom (a reading's NIS band).
+CHI2_2DOF_95 = 5.991464547107979
+
+
+@dataclass
+class NisTally:
+    """The normalized innovation squared ``nu^T S^-1 nu`` of a kind of update (2 degrees of
+    freedom: 2 on average for a consistent filter, inside :data:`CHI2_2DOF_95` 95 % of the time;
+    for a CI fusion, of the fix against ``P + R``, which assumes no correlation), every reading
+    counted, gated out or not."""
+
+    count: int = 0
+    total: float = 0.0
+    inside_95: int = 0
+
+    def add(self, value: float) -> None:
+        self.count += 1
+        self.total += value
+        self.inside_95 += int(value <= CHI2_2DOF_95)
+
+    def scores(self, kind: str) -> dict[str, float]:
+        n = self.count
+        return {f"{kind}_nis_mean": self.total / n if n else math.nan,
+                f"{kind}_nis_in_95": self.inside_95 / n if n else math.nan,
+                f"{kind}_nis_count": float(n)}
+
+
 FUSIONS = ("relative", "sgikf", "ci")
 
 
@@ -187,7 +215,7 @@ class EkfParams:
 def range_bearing_update(pose: np.ndarray, cov: np.ndarray, targets_xy: np.ndarray,
                          range_m: np.ndarray, bearing_rad: np.ndarray, range_std_m: np.ndarray,
                          bearing_std_rad: float, gate_chi2: float,
-                         targets_cov: np.ndarray | None = None):
+                         targets_cov: np.ndarray | None = None, nis: NisTally | None = None):
     """EKF update with ``K`` range-and-bearing readings of targets ``(K, 2)`` (landmarks, or
     teammates with position covariances ``targets_cov (K, 2, 2)``). Returns ``(pose, cov,
     accepted (K,) bool)``; readings beyond the gate are left out."""
@@ -209,6 +237,9 @@ def range_bearing_update(pose: np.ndarray, cov: np.ndarray, targets_xy: np.ndarr
         noise = noise + ht @ targets_cov @ ht.transpose(0, 2, 1)
     s_each = h @ cov @ h.transpose(0, 2, 1) + noise
     d2 = np.einsum("ki,kij,kj->k", nu, np.linalg.inv(s_each), nu)
+    if nis is not None:  # every reading, gated out or not
+        for value in d2.tolist():
+            nis.add(value)
     accepted = d2 < gate_chi2
     if not accepted.any():
         return pose, cov, accepted
@@ -274,12 +305,15 @@ def propagate_calibrated(state: np.ndarray, cov: np.ndarray, v_mps: float, omega
 
 
 def position_update(pose: np.ndarray, cov: np.ndarray, fix_xy: np.ndarray, fix_cov: np.ndarray,
-                    gate_chi2: float):
+                    gate_chi2: float, nis: NisTally | None = None):
     """EKF update with a direct position measurement ``fix_xy`` of covariance ``fix_cov``.
     Returns ``(pose, cov, accepted)``."""
     nu = fix_xy - pose[:2]
     s = cov[:2, :2] + fix_cov
-    if float(nu @ np.linalg.solve(s, nu)) >= gate_chi2:
+    d2 = float(nu @ np.linalg.solve(s, nu))
+    if nis is not None:
+        nis.add(d2)
+    if d2 >= gate_chi2:
         return pose, cov, False
     gain = np.linalg.solve(s, cov[:2, :]).T  # (n, 2)
     new = pose + gain @ nu
@@ -293,7 +327,7 @@ def position_update(pose: np.ndarray, cov: np.ndarray, fix_xy: np.ndarray, fix_c
 
 
 def ci_position_update(pose: np.ndarray, cov: np.ndarray, fix_xy: np.ndarray, fix_cov: np.ndarray,
-                       gate_chi2: float):
+                       gate_chi2: float, nis: NisTally | None = None):
     """Covariance intersection of this robot's position with a position fix of unknown
     correlation to it (Julier and Uhlmann), then the rest of the state by conditioning.
 
@@ -309,7 +343,10 @@ def ci_position_update(pose: np.ndarray, cov: np.ndarray, fix_xy: np.ndarray, fi
 
     p, p_cov = pose[:2], cov[:2, :2]
     nu = fix_xy - p
-    if float(nu @ np.linalg.solve(p_cov + fix_cov, nu)) >= gate_chi2:
+    d2 = float(nu @ np.linalg.solve(p_cov + fix_cov, nu))
+    if nis is not None:  # against P + R: as if uncorrelated (NisTally)
+        nis.add(d2)
+    if d2 >= gate_chi2:
         return pose, cov, False, 1.0
     info_own, info_fix = np.linalg.inv(p_cov), np.linalg.inv(fix_cov)
 
@@ -361,6 +398,8 @@ class EkfLocalizer:
         self.landmark_updates = 0  #: readings accepted so far
         self.landmark_rejected = 0  #: readings gated out so far
         self.teammate_updates = 0
+        #: The NIS of the landmark and teammate updates (issue 46; a hybrid shares its own).
+        self.nis = {"landmark": NisTally(), "teammate": NisTally()}
         self._out: bytes | None = None
         self._commands: deque[tuple[float, float]] = deque()  # given, not yet carried out
 
@@ -388,7 +427,8 @@ class EkfLocalizer:
                 rng_m = obs.landmark_range_m[known]
                 self.pose, self.covariance, ok = range_bearing_update(
                     self.pose, self.covariance, xy[known], rng_m, obs.landmark_bearing_rad[known],
-                    setup.camera.range_std(rng_m), setup.camera.bearing_std_rad, params.gate_chi2)
+                    setup.camera.range_std(rng_m), setup.camera.bearing_std_rad, params.gate_chi2,
+                    nis=self.nis["landmark"])
                 self.landmark_updates += int(ok.sum())
                 self.landmark_rejected += int((~ok).sum())
         if not setup.cooperative:
@@ -419,7 +459,7 @@ class EkfLocalizer:
             xy, cov = position_fix(replace(reading, report=replace(rep, covariance=floored)), self.pose[2],
                                    self.covariance[2, 2], self.setup.camera)
             self.pose, self.covariance, accepted, _ = ci_position_update(
-                self.pose, self.covariance, xy, cov, params.gate_chi2)
+                self.pose, self.covariance, xy, cov, params.gate_chi2, nis=self.nis["teammate"])
             self.teammate_updates += int(accepted)
             return
         inflated = replace(reading, report=replace(rep, covariance=teammate_cov))
@@ -436,12 +476,13 @@ class EkfLocalizer:
             self.pose, self.covariance, ok = range_bearing_update(
                 self.pose, self.covariance, rep.pose[None, :2], np.array([reading.range_m]),
                 np.array([reading.bearing_rad]), camera.range_std(np.array([reading.range_m])),
-                camera.bearing_std_rad, params.gate_chi2, targets_cov=teammate_cov[None, :2, :2])
+                camera.bearing_std_rad, params.gate_chi2, targets_cov=teammate_cov[None, :2, :2],
+                nis=self.nis["teammate"])
             accepted = bool(ok[0])
         else:
             xy, cov = position_fix(inflated, self.pose[2], self.covariance[2, 2], camera)
             self.pose, self.covariance, accepted = position_update(
-                self.pose, self.covariance, xy, cov, params.gate_chi2)
+                self.pose, self.covariance, xy, cov, params.gate_chi2, nis=self.nis["teammate"])
         self.teammate_updates += int(accepted)
 
     def estimate(self) -> np.ndarray:
@@ -450,6 +491,11 @@ class EkfLocalizer:
     def covariance_xy(self) -> np.ndarray:
         """The estimate's position covariance (2 x 2): what the consistency scores read."""
         return self.covariance[:2, :2].copy()
+
+    def nis_scores(self) -> dict[str, float]:
+        """Mean NIS, share inside the 95 % band and count, of landmark and teammate updates
+        (SGIKF fusions, which have no innovation test, are not counted)."""
+        return {**self.nis["landmark"].scores("landmark"), **self.nis["teammate"].scores("teammate")}
 
     def heading_variance(self) -> float:
         """The heading's variance [rad^2]: the heading NEES reads it (issue 46)."""

@@ -82,7 +82,7 @@ from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
-from swarmloc.agents.replay.ekf import EkfLocalizer, EkfParams, range_bearing_update
+from swarmloc.agents.replay.ekf import EkfLocalizer, EkfParams, NisTally, range_bearing_update
 from swarmloc.agents.replay.localizers import (
     LandmarkSetup,
     _real,
@@ -270,8 +270,12 @@ class HybridLocalizer:
         #: How many times a self-calibrating wrapper has folded the camera's bias (it keeps
         #: this current, before it hands over the recalibrated camera); 0 without one.
         self.calibration_folds = 0
+        #: The NIS of its tracking EKFs' updates, over every EKF it hands over to (issue 46);
+        #: the particle filter's search has no innovation to count.
+        self.nis = {"landmark": NisTally(), "teammate": NisTally()}
         if setup.initial_area_m is None:
             self.ekf = EkfLocalizer(self._tracking_setup(setup), self.ekf_params)
+            self.ekf.nis = self.nis
             self.phase = TRACK
         else:
             self._start_search()
@@ -333,6 +337,7 @@ class HybridLocalizer:
         fresh = replace(self.ekf_params, teammate_floor_std_m=max(
             self.ekf_params.teammate_floor_std_m, self.params.fresh_teammate_floor_std_m))
         self.ekf = EkfLocalizer(self._tracking_setup(setup), fresh)
+        self.ekf.nis = self.nis
         self.ekf.covariance[:3, :3] = cov  # the pose block (the EKF may carry more state)
         self._fresh_ticks = 0
         self.pf = None
@@ -406,6 +411,10 @@ class HybridLocalizer:
         read, issue 46); None while the particle filter searches (its belief is not one
         Gaussian)."""
         return None if self.phase == SEARCH or self.ekf is None else self.ekf.covariance_xy()
+
+    def nis_scores(self) -> dict[str, float]:
+        """The NIS of the tracking EKFs' landmark and teammate updates (every EKF it ran)."""
+        return {**self.nis["landmark"].scores("landmark"), **self.nis["teammate"].scores("teammate")}
 
     def heading_variance(self) -> float | None:
         """The tracking EKF's heading variance while it tracks; None while the search runs."""

@@ -23,6 +23,7 @@ from swarmloc.agents.replay.calibration import (
     robust_std,
 )
 from swarmloc.agents.replay.colo import COLO_ALGORITHMS
+from swarmloc.agents.replay.ekf import CHI2_2DOF_95
 from swarmloc.agents.replay.localizers import (
     ALGORITHMS,
     CameraNoise,
@@ -503,8 +504,6 @@ def consistency(result: ReplayResult) -> dict[int, dict[str, float]]:
     return out
 
 
-#: chi-square 95 % quantile, 2 degrees of freedom.
-CHI2_2DOF_95 = 5.991464547107979
 #: chi-square 95 % quantile, 1 degree of freedom (the heading alone).
 CHI2_1DOF_95 = 3.841458820694124
 
