@@ -13,6 +13,10 @@ compiled tick, without Python objects or exceptions, on preallocated arrays:
   ``decode(bytes, EpuckSense)`` accepts too, with the very same values (bit for bit).
 - :func:`encode_act` writes exactly the bytes of ``encode(EpuckAct(...))``, and refuses (-1)
   exactly where ``encode`` raises :class:`~swarmloc.protocol.messages.ProtocolError`.
+- :func:`encode_senses` is the world-server's side (issue 47): every live robot's Sense of one
+  tick in one call, each exactly the bytes of ``encode(EpuckSense(...))``, refusing (-1) where
+  ``encode`` would raise for any of them (the world then runs the reference, which raises the
+  precise error).
 
 The protocol codec (``protocol/messages.py``) stays the reference. Key names, lengths and bounds
 are taken from its ``_FIELD_SPECS`` table at import, which also checks that the table still has
@@ -361,4 +365,119 @@ def encode_act(tick, robot_id, wheel, payload, payload_len, state, pose, out):
     return pos
 
 
-__all__ = ["ACT_MAX_BYTES", "N_PERCEPTS", "encode_act", "parse_sense"]
+#: Bytes of a Sense without received messages, at most (tick and robot id at their widest).
+SENSE_BASE_MAX_BYTES = (_T_SENSE_HEAD.shape[0] + 9 + _T_ROBOT_ID.shape[0] + 9 + _T_ENCODER.shape[0]
+                        + _T_IR.shape[0] + _T_GROUND.shape[0] + 13 * 9 + _T_RECEIVED.shape[0] + 3
+                        + _T_FINAL.shape[0] + 1)
+#: Bytes one received message adds, at most.
+RAB_MAX_BYTES = (_T_RAB_HEAD.shape[0] + 9 + _T_RANGE.shape[0] + 9 + _T_BEARING.shape[0] + 9
+                 + _T_PAYLOAD.shape[0] + 2 + MAX_RAB_PAYLOAD_BYTES)
+
+
+@njit(cache=True, error_model="numpy")
+def encode_senses(tick, robots, encoder, ir, ground, d_sender, d_receiver, d_range, d_bearing,
+                  payloads, payload_len, out, offsets):
+    """Write the Sense of every robot in ``robots`` (int64, ascending) for ``tick`` into ``out``:
+    robot ``robots[i]``'s message is ``out[offsets[i]:offsets[i + 1]]``, byte for byte
+    ``encode(EpuckSense(tick, r, tuple(encoder[r]), tuple(ir[r]), tuple(ground[r]), received,
+    False))``, where ``received`` holds, in delivery order, a :class:`RabMessage` for each
+    delivery ``j`` to ``r`` (``d_receiver[j] == r``) whose sender sends (``payload_len[s] >= 0``;
+    its payload ``payloads[s, :payload_len[s]]``). What ``ForagingService`` built in Python.
+
+    ``encoder`` (n, 2), ``ir`` (n, 8), ``ground`` (n, 3) float64; deliveries as the medium's
+    arrays; ``payloads`` uint8 (n, >= 64); ``payload_len`` int64 (n,), -1 for no message;
+    ``out`` uint8 (at least ``len(robots) * SENSE_BASE_MAX_BYTES + deliveries * RAB_MAX_BYTES``);
+    ``offsets`` int64 (len(robots) + 1,). Returns the bytes written, or -1 where ``encode``
+    raises for some robot (a reading out of its bounds or not finite, more than ``MAX_RECEIVED``
+    messages, a payload too long, an id out of range) or the arrays do not fit.
+    """
+    n = encoder.shape[0]
+    m = robots.shape[0]
+    if offsets.shape[0] < m + 1 or not (_S_TICK_LO <= tick <= _S_TICK_HI):
+        return -1
+    if ir.shape[0] != n or ground.shape[0] != n or payload_len.shape[0] != n or payloads.shape[0] != n:
+        return -1
+    # deliveries grouped by receiver, in their order (a stable counting sort)
+    count = np.zeros(n + 1, np.int64)
+    for j in range(d_receiver.shape[0]):
+        r = d_receiver[j]
+        s = d_sender[j]
+        if r < 0 or r >= n or s < 0 or s >= n:
+            return -1
+        if payload_len[s] >= 0:
+            count[r + 1] += 1
+    for r in range(n):
+        count[r + 1] += count[r]
+    order = np.empty(count[n], np.int64)
+    fill = count[:n].copy()
+    for j in range(d_receiver.shape[0]):
+        if payload_len[d_sender[j]] >= 0:
+            order[fill[d_receiver[j]]] = j
+            fill[d_receiver[j]] += 1
+    pos = 0
+    for i in range(m):
+        r = robots[i]
+        offsets[i] = pos
+        if r < 0 or r >= n or not (_S_ID_LO <= r <= _S_ID_HI):
+            return -1
+        k = count[r + 1] - count[r]
+        if k > MAX_RECEIVED:
+            return -1
+        if pos + SENSE_BASE_MAX_BYTES + k * RAB_MAX_BYTES > out.shape[0]:
+            return -1
+        pos = _put_token(out, pos, _T_SENSE_HEAD)
+        pos = _put_uint(out, pos, tick)
+        pos = _put_token(out, pos, _T_ROBOT_ID)
+        pos = _put_uint(out, pos, r)
+        pos = _put_token(out, pos, _T_ENCODER)
+        for c in range(2):
+            if not (_ENC_LO <= encoder[r, c] <= _ENC_HI):
+                return -1
+            pos = _put_f64(out, pos, encoder[r, c])
+        pos = _put_token(out, pos, _T_IR)
+        for c in range(8):
+            if not (_IR_LO <= ir[r, c] <= _IR_HI):
+                return -1
+            pos = _put_f64(out, pos, ir[r, c])
+        pos = _put_token(out, pos, _T_GROUND)
+        for c in range(3):
+            if not (_GROUND_LO <= ground[r, c] <= _GROUND_HI):
+                return -1
+            pos = _put_f64(out, pos, ground[r, c])
+        pos = _put_token(out, pos, _T_RECEIVED)
+        if k <= 15:
+            out[pos] = np.uint8(0x90 | k)
+            pos += 1
+        else:
+            out[pos] = np.uint8(_ARRAY16)
+            pos = _put_be(out, pos + 1, np.uint64(k), 2)
+        for q in range(count[r], count[r + 1]):
+            j = order[q]
+            s = d_sender[j]
+            length = payload_len[s]
+            if (not (_SENDER_LO <= s <= _SENDER_HI) or not (_RANGE_LO <= d_range[j] <= _RANGE_HI)
+                    or not (_BEARING_LO <= d_bearing[j] <= _BEARING_HI)
+                    or length > MAX_RAB_PAYLOAD_BYTES or length > payloads.shape[1]):
+                return -1
+            pos = _put_token(out, pos, _T_RAB_HEAD)
+            pos = _put_uint(out, pos, s)
+            pos = _put_token(out, pos, _T_RANGE)
+            pos = _put_f64(out, pos, d_range[j])
+            pos = _put_token(out, pos, _T_BEARING)
+            pos = _put_f64(out, pos, d_bearing[j])
+            pos = _put_token(out, pos, _T_PAYLOAD)
+            out[pos] = np.uint8(_BIN8)
+            out[pos + 1] = np.uint8(length)
+            pos += 2
+            for b in range(length):
+                out[pos + b] = payloads[s, b]
+            pos += length
+        pos = _put_token(out, pos, _T_FINAL)
+        out[pos] = np.uint8(_FALSE)
+        pos += 1
+    offsets[m] = pos
+    return pos
+
+
+__all__ = ["ACT_MAX_BYTES", "N_PERCEPTS", "RAB_MAX_BYTES", "SENSE_BASE_MAX_BYTES", "encode_act",
+           "encode_senses", "parse_sense"]
