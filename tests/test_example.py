@@ -51,6 +51,11 @@ def test_the_example_runs_in_an_experiment_beside_the_baselines(tmp_path):
     assert {r["steps"] for r in rows} == {"240"}  # 120 s of the scenario's 0.5 s steps
     cem = next(r for r in rows if r["algorithm"] == "cem")
     assert float(cem["final_error_m"]) < 0.3, cem
+    # ... and its rows get the comparison page, whose "Regenerate" line names the plugin
+    report = _swarmloc(["report", str(out), "--family", "generic", "--spec", str(SPEC), "--out", "rep"], tmp_path)
+    assert report.returncode == 0, report.stderr[-2000:]
+    page = (tmp_path / "rep" / "README.md").read_text()
+    assert "algorithm.name=cem" in page and f"--plugin {PLUGIN}" in page, page[:2000]
 
 
 LANDMARK_PLUGIN = REPO / "examples" / "landmark_lsq.py"
@@ -87,3 +92,29 @@ def test_the_documented_mrclam_command_runs_the_example_and_it_beats_dead_reckon
     bad = run_swarmloc(["--plugin", str(LANDMARK_PLUGIN), "mrclam", str(synthetic_folder), "--algorithm", "lsq-fix",
                         "--param", "min_landmark=3"], cwd=tmp_path, timeout_s=120)
     assert bad.returncode == 2 and "min_landmark: unknown lsq-fix parameter (known: min_landmarks" in bad.stderr
+
+
+LSQ_SPEC = REPO / "examples" / "lsq-vs-ekf.toml"
+
+
+@pytest.mark.integration
+def test_the_real_data_example_runs_as_processes_in_an_experiment_and_in_the_report(tmp_path, synthetic_folder):
+    dataset = f"dataset={json.dumps(str(synthetic_folder))}"
+    run = run_swarmloc(["--plugin", str(LANDMARK_PLUGIN), "run", "mrclam6-ekf-coop", "--algorithm", "lsq-fix",
+                        "--set", dataset, "--set", "duration_s=20.0", "--set", "calibration_s=0.0",
+                        "--run", "lsq", "--out", "runs", "--quiet"], cwd=tmp_path, timeout_s=300)
+    assert run.returncode == 0, run.stderr[-2000:]
+    result = json.loads((tmp_path / "runs" / "lsq" / "results.json").read_text())
+    assert result["strategy"] == "lsq-fix" and result["reason"] == "completed" and result["robots"] == 3
+    out = tmp_path / "lsq.csv"
+    done = run_swarmloc(["--plugin", str(LANDMARK_PLUGIN), "experiment", str(LSQ_SPEC), "--set", dataset,
+                         "--duration-s", "30", "--out", str(out), "--quiet"], cwd=tmp_path, timeout_s=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    rows = list(csv.DictReader(out.open()))
+    assert sorted({r["algorithm"] for r in rows}) == ["dr", "ekf", "lsq-fix"] and len(rows) == 9  # 3 robots each
+    rmse = {a: sum(float(r["position_rmse_m"]) for r in rows if r["algorithm"] == a) / 3 for a in ("dr", "lsq-fix")}
+    assert rmse["lsq-fix"] < rmse["dr"], rmse
+    report = run_swarmloc(["--plugin", str(LANDMARK_PLUGIN), "report", str(out), "--family", "generic",
+                           "--spec", str(LSQ_SPEC), "--out", "rep"], cwd=tmp_path, timeout_s=300)
+    assert report.returncode == 0, report.stderr[-2000:]
+    assert "algorithm=lsq-fix" in (tmp_path / "rep" / "README.md").read_text()

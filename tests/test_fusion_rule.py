@@ -5,6 +5,7 @@ example of docs/extending.md, examples/fusion_rule.py)."""
 
 from __future__ import annotations
 
+import csv
 import json
 import math
 from pathlib import Path
@@ -120,3 +121,20 @@ def test_the_example_rule_runs_as_processes_equal_to_the_batch_engine(tmp_path):
     batch = _batch_json(tmp_path, "SFCI")
     assert result["metrics"] == batch
     assert batch != _batch_json(tmp_path, "SSGIKF"), "the rule changed the run: robots met and fused"
+
+
+@pytest.mark.integration
+def test_the_example_rule_runs_in_its_experiment_and_gets_the_report(tmp_path):
+    spec = EXAMPLE.with_name("fci-vs-baselines.toml")
+    out = tmp_path / "fci.csv"
+    done = run_swarmloc(["--plugin", str(EXAMPLE), "experiment", str(spec), "--replications", "2",
+                         "--duration-s", "300", "--out", str(out), "--quiet"], cwd=tmp_path, timeout_s=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    rows = list(csv.DictReader(out.open()))
+    assert sorted({r["agent.strategy"] for r in rows}) == sorted(["SFCI", "DFCI", "SSGIKF", "DSGIKF", "SSGIFF", "NC"])
+    assert len(rows) == 12
+    report = run_swarmloc(["--plugin", str(EXAMPLE), "report", str(out), "--family", "generic", "--spec", str(spec),
+                           "--out", "rep"], cwd=tmp_path, timeout_s=300)
+    assert report.returncode == 0, report.stderr[-2000:]
+    page = (tmp_path / "rep" / "README.md").read_text()
+    assert "agent.strategy=SFCI" in page and f"--plugin {EXAMPLE}" in page
