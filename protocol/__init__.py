@@ -30,14 +30,13 @@ from swarmloc.protocol.messages import (
 
 __all__ = [
     "MAX_MESSAGE_BYTES",
-    "Field",
-    "register_message",
     "MAX_RAB_PAYLOAD_BYTES",
     "MESSAGE_TYPES",
     "PROTOCOL_VERSION",
     "EpuckAct",
     "EpuckSense",
     "ErrorReport",
+    "Field",
     "Join",
     "Keys",
     "ProtocolError",
@@ -47,5 +46,6 @@ __all__ = [
     "WorldState",
     "decode",
     "encode",
+    "register_message",
     "validate_run_name",
 ]

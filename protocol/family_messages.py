@@ -109,6 +109,9 @@ class ReplaySense:
     #: the robot's true heading at the tick's end, when the replay gives it (CoLo-AT's setting,
     #: ``heading = "truth"``): one angle in [-pi, pi], else empty
     true_heading_rad: tuple[float, ...] = ()
+    #: the sum of the squared gaps of this tick's recorded odometry messages [s^2] (what
+    #: CoLo-AT's per-message noise grows with), when known: one value >= 0, else empty
+    odometry_gap2_s2: tuple[float, ...] = ()
 
 
 @dataclass(frozen=True, slots=True)

@@ -609,6 +609,7 @@ _FIELD_SPECS: dict[type, tuple[str, dict[str, _Spec]]] = {
         "received": _Tuple(_Message(RadioMsg), MAX_TEAMMATES),
         "final": _Bool(),
         "true_heading_rad": _Tuple(_BEARING, 1),
+        "odometry_gap2_s2": _Tuple(_Float(0.0), 1),
     }),
     EstimateAct: ("estimate_act", {
         "tick": _TICK,

@@ -56,6 +56,7 @@ class ReplayAgent:
             robot_bearing_rad=r_bearing,
             received=tuple(Message(m.sender_id, m.payload) for m in sense.received),
             true_heading_rad=sense.true_heading_rad[0] if sense.true_heading_rad else None,
+            odometry_gap2_s2=sense.odometry_gap2_s2[0] if sense.odometry_gap2_s2 else None,
         )
         self.localizer.step(obs)
         for sender, exc in getattr(self.localizer, "rejected", ()):

@@ -128,6 +128,7 @@ from swarmloc.agents.replay.localizers import (
 from swarmloc.world.replay.replay import LandmarkObservation
 
 NOISE_MODELS = ("swarmloc", "colo", "colo-unscaled")
+ODOMETRY_NOISE = ("per-tick", "per-message")
 SCI_INDEPENDENT = ("since-broadcast", "paper")
 #: CoLo-AT's odometry variances along and across the heading (``robots/robot_system.py``).
 COLO_ODOMETRY_VAR = (0.01, 0.1)
@@ -163,6 +164,12 @@ class ColoParams:
     #: (MRCLAM's odometry is the command, its errors systematic; see docs/mrclam/colo.md).
     motion_noise_scale: float = 1.0
     reading_noise_scale: float = 1.0
+    #: How a CoLo noise model's odometry covariance grows: ``per-tick`` (``var dt 0.015 s`` per
+    #: tick of ``dt``: the same growth per second whatever the log's rhythm) or ``per-message``
+    #: (CoLo-AT's: ``var dt_i^2`` for each odometry message ``i``, ``dt_i`` the time since the
+    #: one before, so a gap in the log adds its square at once; the replay gives each tick's
+    #: ``sum dt_i^2``). See the module docstring.
+    odometry_noise: str = "per-tick"
 
     def __post_init__(self):
         _real(self.motion_noise_scale, "motion_noise_scale", positive=True)
@@ -172,6 +179,11 @@ class ColoParams:
                              f"{self.sci_independent!r}")
         if self.noise_model not in NOISE_MODELS:
             raise ValueError(f"noise_model: expected one of {NOISE_MODELS}, got {self.noise_model!r}")
+        if self.odometry_noise not in ODOMETRY_NOISE:
+            raise ValueError(f"odometry_noise: expected one of {ODOMETRY_NOISE}, got {self.odometry_noise!r}")
+        if self.odometry_noise == "per-message" and self.noise_model == "swarmloc":
+            raise ValueError("odometry_noise: 'per-message' is CoLo-AT's growth of its own noise "
+                             "models ('colo', 'colo-unscaled'), not of 'swarmloc'")
         w = _real(self.ci_weight, "ci_weight")
         if not w < 1.0:
             raise ValueError(f"ci_weight must be 0 (chosen) or in (0, 1), got {self.ci_weight!r}")
@@ -191,9 +203,11 @@ def rot(angle_rad: float) -> np.ndarray:
 
 
 def motion_noise(setup: LandmarkSetup, model: str, v_mps: float, omega_rad_s: float, dt_s: float,
-                 heading_mid_rad: float, d: int) -> np.ndarray:
+                 heading_mid_rad: float, d: int, gap2_s2: float | None = None) -> np.ndarray:
     """The covariance ``(d, d)`` one tick of odometry adds to a robot's block, in the world frame
-    (position, then heading when ``d == 3``)."""
+    (position, then heading when ``d == 3``); a CoLo model's position part grows by ``var dt
+    0.015 s``, or with ``gap2_s2`` (the tick's ``sum dt_i^2`` of odometry messages) by ``var
+    gap2_s2`` as CoLo-AT's per-message propagation."""
     dist = v_mps * dt_s
     c, s = math.cos(heading_mid_rad), math.sin(heading_mid_rad)
     std_d, std_t = setup.motion.tick_std(v_mps, omega_rad_s, dt_s)
@@ -206,7 +220,8 @@ def motion_noise(setup: LandmarkSetup, model: str, v_mps: float, omega_rad_s: fl
         across = across * v_mps * v_mps
     g = rot(heading_mid_rad)
     out = np.zeros((d, d))
-    out[:2, :2] = g @ np.diag([along, across]) @ g.T * (dt_s * COLO_ODOMETRY_PERIOD_S)
+    growth = dt_s * COLO_ODOMETRY_PERIOD_S if gap2_s2 is None else gap2_s2
+    out[:2, :2] = g @ np.diag([along, across]) @ g.T * growth
     if d == 3:
         out[2, 2] = std_t**2
     return out
@@ -291,11 +306,19 @@ def _grow(m: np.ndarray, block: np.ndarray) -> np.ndarray:
     return out
 
 
-def propagate_robot(joint: Joint, k: int, setup: LandmarkSetup, model: str, v_mps: float,
-                    omega_rad_s: float, dt_s: float, true_heading_rad: float | None,
-                    scale: float = 1.0) -> None:
-    """Robot ``k``'s block moved by one tick of odometry (Roumeliotis and Bekey eq. (5)-(8): its
-    cross-covariances follow ``Phi_k``); with the heading given, along the mid-tick true heading."""
+def propagate_robot(joint: Joint, k: int, setup: LandmarkSetup, params: ColoParams,
+                    ev: TickEvents) -> None:
+    """Robot ``k``'s block moved by one tick of odometry ``ev`` (Roumeliotis and Bekey eq.
+    (5)-(8): its cross-covariances follow ``Phi_k``); with the heading given, along the mid-tick
+    true heading. The noise is ``params``' model, times its ``motion_noise_scale``."""
+    model, scale = params.noise_model, params.motion_noise_scale
+    v_mps, omega_rad_s, dt_s, true_heading_rad = ev.v_mps, ev.omega_rad_s, ev.dt_s, ev.true_heading_rad
+    gap2 = None
+    if params.odometry_noise == "per-message":
+        gap2 = ev.gap2_s2
+        if gap2 is None:
+            raise ValueError("odometry_noise: 'per-message' needs the gaps of the odometry messages, "
+                             "which this observation does not carry")
     d, sl = joint.d, joint.block(k)
     if d == 2:
         prev = joint.heading[k]
@@ -304,7 +327,7 @@ def propagate_robot(joint: Joint, k: int, setup: LandmarkSetup, model: str, v_mp
         joint.heading[k] = end
         dist = v_mps * dt_s
         joint.x[sl] += dist * np.array([math.cos(mid), math.sin(mid)])
-        q = motion_noise(setup, model, v_mps, omega_rad_s, dt_s, mid, 2) * scale
+        q = motion_noise(setup, model, v_mps, omega_rad_s, dt_s, mid, 2, gap2) * scale
         joint.P[sl, sl] += q
         if joint.Pi is not None:
             joint.Pi[sl, sl] += q
@@ -315,7 +338,7 @@ def propagate_robot(joint: Joint, k: int, setup: LandmarkSetup, model: str, v_mp
     c, s = math.cos(mid), math.sin(mid)
     joint.x[sl] = [x + dist * c, y + dist * s, float(wrap_angle(th + turn))]
     a = np.array([[1.0, 0.0, -dist * s], [0.0, 1.0, dist * c], [0.0, 0.0, 1.0]])
-    q = motion_noise(setup, model, v_mps, omega_rad_s, dt_s, mid, 3) * scale
+    q = motion_noise(setup, model, v_mps, omega_rad_s, dt_s, mid, 3, gap2) * scale
     for m in (joint.P, joint.Pi):
         if m is None:
             continue
@@ -517,20 +540,24 @@ class TickEvents:
     true_heading_rad: float | None
     landmarks: np.ndarray  #: (K, 3) id, range, bearing
     robots: np.ndarray  #: (M, 3) id, range, bearing
+    #: ``sum dt_i^2`` of the tick's odometry messages (ColoParams.odometry_noise), None: unknown
+    gap2_s2: float | None = None
 
     @classmethod
     def of(cls, obs: LandmarkObservation) -> TickEvents:
         return cls(obs.odometry_v_mps, obs.odometry_omega_rad_s, obs.odometry_dt_s,
                    obs.true_heading_rad,
                    np.column_stack([obs.landmark_ids, obs.landmark_range_m, obs.landmark_bearing_rad]),
-                   np.column_stack([obs.robot_ids, obs.robot_range_m, obs.robot_bearing_rad]))
+                   np.column_stack([obs.robot_ids, obs.robot_range_m, obs.robot_bearing_rad]),
+                   obs.odometry_gap2_s2)
 
 
 def encode_extra(events: TickEvents | None = None, joint: Joint | None = None) -> bytes:
     wire = {}
     if events is not None:
         wire["o"] = np.array([events.v_mps, events.omega_rad_s, events.dt_s,
-                              math.nan if events.true_heading_rad is None else events.true_heading_rad],
+                              math.nan if events.true_heading_rad is None else events.true_heading_rad,
+                              math.nan if events.gap2_s2 is None else events.gap2_s2],
                              dtype="<f8").tobytes()
         wire["l"] = np.ascontiguousarray(events.landmarks[:MAX_REPORT_SIGHTINGS], dtype="<f8").tobytes()
     if joint is not None:
@@ -556,12 +583,13 @@ def decode_extra(report: TeammateReport, d: int):
         raise ValueError("payload.extra: expected a map of o, l, i, h, x, p, q to bytes")
     events = state = None
     if "o" in wire:
-        o = _array(wire["o"], "o", 4, allow_nan=True)
-        if not np.isfinite(o[:3]).all() or not o[2] > 0:
-            raise ValueError("payload.extra.o: odometry must be finite with dt > 0")
+        o = _array(wire["o"], "o", 5, allow_nan=True)
+        if not np.isfinite(o[:3]).all() or not o[2] > 0 or o[4] < 0:
+            raise ValueError("payload.extra.o: odometry must be finite with dt > 0 and gaps >= 0")
         lm = _array(wire.get("l", b""), "l", None).reshape(-1, 3)
         events = TickEvents(float(o[0]), float(o[1]), float(o[2]),
-                            None if math.isnan(o[3]) else float(o[3]), lm, report.seen)
+                            None if math.isnan(o[3]) else float(o[3]), lm, report.seen,
+                            None if math.isnan(o[4]) else float(o[4]))
     if "i" in wire:
         ids = np.frombuffer(wire["i"], dtype="<i8") if len(wire["i"]) % 8 == 0 else None
         if ids is None or not 0 < ids.size <= _MAX_TEAM or len(set(ids.tolist())) != ids.size:
@@ -739,8 +767,7 @@ class ReplicaLocalizer(_ColoBase):
         else:
             view = joint  # alone: nothing to wait for
         k = view.index(self.setup.robot_id)
-        propagate_robot(view, k, self.setup, p.noise_model, own.v_mps, own.omega_rad_s, own.dt_s,
-                        own.true_heading_rad, p.motion_noise_scale)
+        propagate_robot(view, k, self.setup, p, own)
         # Cooperative, this robot's readings are counted in the NIS when they are committed
         # (next tick); alone, the view is the filter.
         alone = not self.setup.cooperative
@@ -760,8 +787,7 @@ class ReplicaLocalizer(_ColoBase):
                 dt = next(iter(events.values())).dt_s if events else 0.0
                 random_walk(joint, k, p.teammate_speed_std_mps, p.teammate_turn_std_rad_s, dt)
                 continue
-            propagate_robot(joint, k, self.setup, p.noise_model, ev.v_mps, ev.omega_rad_s, ev.dt_s,
-                            ev.true_heading_rad, p.motion_noise_scale)
+            propagate_robot(joint, k, self.setup, p, ev)
         for rid in sorted(events):
             self._landmarks(joint, joint.index(rid), events[rid].landmarks, self.bda,
                             tally=rid == self.setup.robot_id)
@@ -776,10 +802,9 @@ class LsCiLocalizer(_ColoBase):
 
     def step(self, obs: LandmarkObservation) -> None:
         obs, joint, p = self._begin(obs)
-        propagate_robot(joint, 0, self.setup, p.noise_model, obs.odometry_v_mps,
-                        obs.odometry_omega_rad_s, obs.odometry_dt_s, obs.true_heading_rad,
-                        p.motion_noise_scale)
-        self._landmarks(joint, 0, TickEvents.of(obs).landmarks)
+        ev = TickEvents.of(obs)
+        propagate_robot(joint, 0, self.setup, p, ev)
+        self._landmarks(joint, 0, ev.landmarks)
         self._view = joint
         if not self.setup.cooperative:
             return
@@ -837,9 +862,7 @@ class GlobalStateLocalizer(_ColoBase):
                 joint.add(rid, rep.pose, rep.covariance)
         for k, rid in enumerate(joint.ids):
             if rid == self.setup.robot_id:
-                propagate_robot(joint, k, self.setup, p.noise_model, obs.odometry_v_mps,
-                                obs.odometry_omega_rad_s, obs.odometry_dt_s, obs.true_heading_rad,
-                                p.motion_noise_scale)
+                propagate_robot(joint, k, self.setup, p, TickEvents.of(obs))
             else:
                 random_walk(joint, k, p.teammate_speed_std_mps, p.teammate_turn_std_rad_s,
                             obs.odometry_dt_s)

@@ -84,6 +84,10 @@ class LandmarkObservation:
     #: replay is told to (``ReplayWorld(true_heading=True)``: CoLo-AT's setting, issue 46);
     #: None otherwise. Where the ground truth has a gap or has ended, the last known heading.
     true_heading_rad: float | None = None
+    #: ``sum dt_i^2`` over the odometry messages recorded in this tick, ``dt_i`` each one's gap
+    #: to the message before (a gap in the log counts whole in the tick that ends it): what
+    #: CoLo-AT's per-message propagation adds its noise with (issue 46); None: not given.
+    odometry_gap2_s2: float | None = None
 
 
 def _check_positive(value, name: str) -> float:
@@ -200,6 +204,14 @@ class ReplayWorld:
                 fill = known[np.clip(np.searchsorted(known, np.arange(theta.size), "right") - 1,
                                      0, None)]
                 self._true_heading.append(theta[fill].tolist())
+        self._gap2 = []
+        for rid in self.robot_ids:  # each odometry message's squared gap, in the tick it ends
+            t = dataset.robots[rid].odometry_time_s
+            k = np.searchsorted(self.boundaries_s[1:], t[1:], side="left")
+            inside = (t[1:] > self.boundaries_s[0]) & (k < self.n_ticks)
+            gap2 = np.zeros(self.n_ticks)
+            np.add.at(gap2, k[inside], np.square(np.diff(t))[inside])
+            self._gap2.append(gap2.tolist())
         self.tick = 0
         self._inbox: dict[int, tuple[Message, ...]] = {rid: () for rid in self.robot_ids}
 
@@ -260,7 +272,8 @@ class ReplayWorld:
                 landmark_ids=lm_ids, landmark_range_m=lm_range, landmark_bearing_rad=lm_bearing,
                 robot_ids=r_ids, robot_range_m=r_range, robot_bearing_rad=r_bearing,
                 received=self._inbox[rid],
-                true_heading_rad=None if self._true_heading is None else self._true_heading[i][k]))
+                true_heading_rad=None if self._true_heading is None else self._true_heading[i][k],
+                odometry_gap2_s2=self._gap2[i][k]))
         return out
 
     def step(self, outgoing: Mapping[int, bytes | None]) -> None:

@@ -169,6 +169,7 @@ class ReplayService(DrivenRobots):
                     obs.robot_ids.tolist(), obs.robot_range_m.tolist(), obs.robot_bearing_rad.tolist())),
                 received=tuple(RadioMsg(m.sender_id, m.payload) for m in obs.received),
                 true_heading_rad=() if obs.true_heading_rad is None else (float(obs.true_heading_rad),),
+                odometry_gap2_s2=() if obs.odometry_gap2_s2 is None else (float(obs.odometry_gap2_s2),),
             )
             out.append((i, encode(sense)))
         return out
