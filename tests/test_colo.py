@@ -28,7 +28,7 @@ from swarmloc.deploy.lab.replay.mrclam import (
     run_replay,
     score,
 )
-from swarmloc.world.replay.mrclam import synthesize
+from swarmloc.world.replay.mrclam import synthesize, write_dataset
 from swarmloc.world.replay.replay import LandmarkObservation, Message, ReplayWorld
 
 COLO = ("ls-cen", "ls-bda", "ls-ci", "gs-ci", "gs-sci")
@@ -359,3 +359,61 @@ def test_the_replay_report_refuses_rows_it_cannot_tell_apart(tmp_path):
     with pytest.raises(ConfigError, match="generic"):
         write_report(rows, tmp_path)
     write_report(rows[:1], tmp_path)  # one of them alone is a report
+
+
+# -- CoLo-AT's per-message odometry noise ---------------------------------------------------
+
+
+def test_the_replay_gives_each_tick_the_squared_gaps_of_its_odometry_messages():
+    data = synthesize(SMALL, np.random.default_rng(2))
+    rid = data.robot_ids[0]
+    rec = data.robots[rid]
+    # a 0.73 s hole in the log: the message after it brings 0.73^2 s^2 at once
+    t = rec.odometry_time_s
+    hole = (t > 10.0) & (t < 10.73)
+    rec = replace(rec, odometry_time_s=t[~hole], odometry_v_mps=rec.odometry_v_mps[~hole],
+                  odometry_omega_rad_s=rec.odometry_omega_rad_s[~hole])
+    data = replace(data, robots={**data.robots, rid: rec})
+    world = ReplayWorld(data, 0.1)
+    gap2 = []
+    while not world.done:
+        gap2.append(world.observe()[0].odometry_gap2_s2)
+        world.step({})
+    t = rec.odometry_time_s
+    after = np.flatnonzero(t > 10.73)[0]  # the first message after the hole
+    assert t[after] - t[after - 1] > 0.7
+    inside = (t[1:] > world.boundaries_s[0]) & (t[1:] <= world.boundaries_s[-1])
+    # by hand: every gap counted once, in the tick that ends it
+    assert sum(gap2) == pytest.approx(float(np.sum(np.diff(t)[inside] ** 2)))
+    k = int(np.searchsorted(world.boundaries_s[1:], t[after]))
+    assert gap2[k] >= (t[after] - t[after - 1]) ** 2
+
+
+def test_per_message_noise_grows_with_the_squared_gaps_and_is_refused_where_it_means_nothing():
+    from swarmloc.agents.replay.colo import COLO_ODOMETRY_VAR, motion_noise
+
+    setup = LandmarkSetup(robot_id=1, landmark_ids=np.array([10, 11]), landmark_xy_m=LANDMARKS,
+                          initial_pose=[0.0, 0.0, 0.0])
+    per_tick = motion_noise(setup, "colo-unscaled", 0.2, 0.0, 0.1, 0.0, 2)
+    per_message = motion_noise(setup, "colo-unscaled", 0.2, 0.0, 0.1, 0.0, 2, gap2_s2=0.5)
+    along, across = COLO_ODOMETRY_VAR
+    assert np.allclose(per_message, np.diag([along, across]) * 0.5)  # heading 0: x along
+    assert np.allclose(per_tick, np.diag([along, across]) * 0.1 * colo.COLO_ODOMETRY_PERIOD_S)
+    with pytest.raises(ValueError, match="odometry_noise: 'per-message' is CoLo-AT's growth"):
+        ColoParams(odometry_noise="per-message")  # the swarmloc noise model
+    with pytest.raises(ValueError, match="odometry_noise: expected one of"):
+        ColoParams(noise_model="colo", odometry_noise="per-msg")
+
+
+def test_per_message_noise_crosses_the_process_boundary(tmp_path):
+    # the tick's squared gaps cross the process boundary (ReplaySense) and the replicas' events
+    from swarmloc.protocol.messages import ReplaySense, decode
+    from swarmloc.world.replay.service import ReplayScenario, ReplayService
+
+    data = synthesize(SMALL, np.random.default_rng(2))
+    folder = write_dataset(data, tmp_path / "Synthetic")
+    service = ReplayService(ReplayScenario(dataset=str(folder), algorithm="ls-cen",
+                                           params={"noise_model": "colo", "odometry_noise": "per-message"}))
+    sent = [decode(b, ReplaySense).odometry_gap2_s2 for _, b in service.senses()]
+    direct = [o.odometry_gap2_s2 for o in service.world.observe()]
+    assert [s[0] for s in sent] == pytest.approx(direct) and all(len(s) == 1 for s in sent)
