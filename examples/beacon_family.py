@@ -311,29 +311,24 @@ def load(name: str, overrides=()):
 def settings(spec) -> list:
     import hashlib
 
-    from swarmloc.deploy.lab.experiment import Setting, override_text, value_text
+    from swarmloc.deploy.lab.experiment import Setting, setting_grid
 
     out = []
     for g in spec.group:
-        fixed = [f"{k}={override_text(v)}" for k, v in g.set]
-        for name in g.scenarios:
-            for combo in g.combinations():
-                grid = tuple((k, value_text(v)) for k, v in combo)
-                sid = "/".join([g.name, name, *(f"{k}={t}" for k, t in grid)])
-                overrides = [*fixed, *(f"{k}={override_text(v)}" for k, v in combo)]
+        for name, sid, grid, overrides in setting_grid(g):  # the group's set, then each combination
+            try:
                 if g.duration_s is not None:
                     dt_s = load(name, overrides).scenario.world.dt_s
                     overrides.append(f"world.steps={max(1, round(g.duration_s / dt_s))}")
-                try:
-                    s = load(name, overrides).scenario
-                except ConfigError as exc:
-                    raise ConfigError(f"experiment '{spec.name}', setting '{sid}': {exc}") from None
-                plain = s.to_dict()
-                plain["world"].pop("seed")
-                digest = hashlib.sha256(json.dumps(plain, sort_keys=True).encode()).hexdigest()[:12]
-                out.append(Setting(sid, g.name, name, tuple(overrides), grid, digest, s.world.robots,
-                                   s.world.steps * s.world.dt_s, s.agent.algorithm,
-                                   cost=s.world.robots * s.world.steps))
+                s = load(name, overrides).scenario
+            except ConfigError as exc:
+                raise ConfigError(f"experiment '{spec.name}', setting '{sid}': {exc}") from None
+            plain = s.to_dict()
+            plain["world"].pop("seed")
+            digest = hashlib.sha256(json.dumps(plain, sort_keys=True).encode()).hexdigest()[:12]
+            out.append(Setting(sid, g.name, name, tuple(overrides), grid, digest, s.world.robots,
+                               s.world.steps * s.world.dt_s, s.agent.algorithm,
+                               cost=s.world.robots * s.world.steps))
     return out
 
 

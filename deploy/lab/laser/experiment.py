@@ -29,11 +29,10 @@ files (the template of ``deploy/lab/laser/report.py``).
 
 from __future__ import annotations
 
-import json
 import time
 
 from swarmloc.config import ConfigError
-from swarmloc.deploy.lab.experiment import ExperimentSpec, Job, Setting
+from swarmloc.deploy.lab.experiment import ExperimentSpec, Job, Setting, setting_grid
 from swarmloc.deploy.lab.laser.runner import encode_series_mm, load_laser_scenario, run_laser
 
 #: The setting's description, before the grid keys.
@@ -51,10 +50,6 @@ SEED_KEY = "world.seed"
 REPORT_SPECS = ("laser-table3", "laser-kidnap", "laser-collab", "laser-robustness")
 
 
-def _value_text(value) -> str:
-    return value if isinstance(value, str) else json.dumps(value)
-
-
 def columns(spec: ExperimentSpec) -> list[str]:
     """The header of a laser results file."""
     return [*LEAD_COLUMNS, *spec.grid_keys(), *METRIC_COLUMNS]
@@ -65,25 +60,20 @@ def settings(spec: ExperimentSpec) -> list[Setting]:
     the group and the setting."""
     out = []
     for g in spec.group:
-        fixed = [f"{k}={json.dumps(v)}" for k, v in g.set]
-        for scenario_name in g.scenarios:
-            for combo in g.combinations():
-                grid = tuple((k, _value_text(v)) for k, v in combo)
-                sid = "/".join([g.name, scenario_name, *(f"{k}={t}" for k, t in grid)])
-                overrides = fixed + [f"{k}={json.dumps(v)}" for k, v in combo]
-                where = f"experiment '{spec.name}', group '{g.name}', setting '{sid}'"
-                try:
+        for scenario_name, sid, grid, overrides in setting_grid(g):
+            where = f"experiment '{spec.name}', group '{g.name}', setting '{sid}'"
+            try:
+                scenario = load_laser_scenario(scenario_name, overrides)
+                if g.duration_s is not None:
+                    steps = max(1, round(g.duration_s / scenario.world.dt_s))
+                    overrides.append(f"world.steps={steps}")
                     scenario = load_laser_scenario(scenario_name, overrides)
-                    if g.duration_s is not None:
-                        steps = max(1, round(g.duration_s / scenario.world.dt_s))
-                        overrides.append(f"world.steps={steps}")
-                        scenario = load_laser_scenario(scenario_name, overrides)
-                except (ConfigError, ValueError) as exc:
-                    raise ConfigError(f"{where}: {exc}") from None
-                w = scenario.world
-                out.append(Setting(
-                    sid, g.name, scenario_name, tuple(overrides), grid, scenario.config_hash(),
-                    w.robots, w.steps * w.dt_s, scenario.algorithm.name, cost=w.robots * w.steps))
+            except (ConfigError, ValueError) as exc:
+                raise ConfigError(f"{where}: {exc}") from None
+            w = scenario.world
+            out.append(Setting(
+                sid, g.name, scenario_name, tuple(overrides), grid, scenario.config_hash(),
+                w.robots, w.steps * w.dt_s, scenario.algorithm.name, cost=w.robots * w.steps))
     return out
 
 
