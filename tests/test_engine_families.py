@@ -327,8 +327,12 @@ def test_replay_spec_runs_resumes_and_equals_direct_runs(tmp_path, synthetic_fol
                      str(tmp_path / "spec.toml"), "--set", f'dataset="{synthetic_folder}"']) == 0
     table = (report / "results.md").read_text()
     assert "| ekf |" in table and "| ekf+coop |" in table and "| pf (2 seeds) |" in table
-    assert sorted(p.name for p in report.glob("*.png")) == [
+    assert sorted(p.name for p in report.glob("trajectories_*.png")) == [
         "trajectories_ekf.png", "trajectories_ekf_coop.png", "trajectories_pf.png"]
+    # NEES and covariance trace over time, for the localizers that give a covariance
+    assert sorted(p.name for p in report.glob("consistency_*.png")) == [
+        "consistency_ekf.png", "consistency_ekf_coop.png"]
+    assert "Heading NEES mean" in table and "Landmark NIS mean" in table and "APE RMSE [m]" in table
     assert len(read_rows(report / "results.csv")) == 12
 
 

@@ -79,6 +79,45 @@ def plot_name(label: str) -> str:
     return label.replace("+", "_").replace(" ", "_")
 
 
+def plot_consistency(result: ReplayResult, path: Path, title: str | None = None) -> Path | None:
+    """Each robot's position NEES (with the chi-square 95 % bound; a 5 s running median, the
+    ticks are strongly correlated) and the trace of its position covariance over time, as CoLo-AT
+    plots the trace (issue 46). None (nothing drawn) for a localizer without a covariance."""
+    if result.covariance_xy is None or not np.isfinite(result.covariance_xy).any():
+        return None
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from scipy.ndimage import median_filter
+
+    nees = position_nees(result)
+    t = result.times_s - result.times_s[0]
+    window = max(1, round(5.0 / max(float(np.median(np.diff(result.times_s))), 1e-9)))
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(7.5, 6.0), dpi=110, sharex=True)
+    for i, rid in enumerate(result.robot_ids):
+        n = nees[:, i]
+        ok = np.isfinite(n)
+        if ok.sum() > window:
+            top.semilogy(t[ok], median_filter(n[ok], size=window, mode="nearest"), lw=0.8,
+                         label=f"robot {rid}")
+        trace = np.trace(result.covariance_xy[:, i], axis1=-2, axis2=-1)
+        good = np.isfinite(trace)
+        bottom.semilogy(t[good], trace[good], lw=0.8, label=f"robot {rid}")
+    top.axhline(CHI2_2DOF_95, color="k", ls="--", lw=0.8, label="95 % bound (2 dof)")
+    top.set_ylabel("position NEES (5 s median)")
+    top.legend(fontsize=7, ncol=3)
+    bottom.set_ylabel("trace of P_xy [m^2]")
+    bottom.set_xlabel("time [s]")
+    top.set_title(title or f"{result.config.label}: consistency over time", fontsize=9)
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
 def plot_trajectories(result: ReplayResult, dataset: MrclamDataset, path: Path,
                       title: str | None = None) -> Path:
     """Estimated (solid) vs true (dotted) paths of every robot, landmarks as black squares."""

@@ -194,7 +194,7 @@ def write_report(rows: list[dict], out_dir: str | Path, replay_first=None,
     self-calibrated tracking configuration and every global-localization and kidnap one (the
     reference calibrations only have table rows). With ``datasets_by_name`` (the data sets
     themselves) the global-localization section opens with :func:`bound_table`."""
-    from swarmloc.deploy.lab.replay.mrclam import plot_trajectories
+    from swarmloc.deploy.lab.replay.mrclam import plot_consistency, plot_trajectories
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -237,6 +237,7 @@ def write_report(rows: list[dict], out_dir: str | Path, replay_first=None,
                                          or key[4] is not None):
             result, dataset = replay_first(key, seeds[0])
             plot_trajectories(result, dataset, out / f"trajectories_{plot_name(_label(key))}.png")
+            plot_consistency(result, out / f"consistency_{plot_name(_label(key))}.png")
     with (out / "results.csv").open("w", newline="") as fh:
         writer = csv.DictWriter(fh, fieldnames=list(RESULT_COLUMNS))
         writer.writeheader()
