@@ -173,6 +173,9 @@ def main_world(args) -> int:
 
     scenario = load_from_args(args, any_family=True)
     keys = Keys(args.run)
+    from swarmloc.deploy.run import ensure_open_files
+
+    ensure_open_files(scenario.robots)  # a connection per agent: refused here, not after start-up
     stop = _install_stop()
     _compile_kernels(scenario.family)  # before the join queryable: the join timeout never races a compiler
     out = Path(args.out) if args.out else None

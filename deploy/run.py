@@ -183,11 +183,40 @@ def print_metrics(summary: dict) -> None:
     print(f"  robots on the path (2nd half): {'%.0f %%' % (100 * frac) if frac is not None else '-'}")
 
 
+#: Open files the world-server needs beside one connection per agent (its Zenoh runtime, the
+#: recording, logs), with room to spare.
+FD_BASE = 256
+
+
+def ensure_open_files(robots: int) -> int:
+    """Make room for a swarm's connections before anything starts: the world-server holds one
+    per agent, and a system's default soft limit (often 1,024) stopped a 1,000-agent world
+    after start-up with agents missing. Raises this process's soft limit of open files (the
+    pieces inherit it) up to the hard limit; ConfigError, naming the largest swarm that fits,
+    if even the hard limit is too low. Returns the soft limit now in force."""
+    import resource
+
+    need = robots + FD_BASE
+    soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+    if soft == resource.RLIM_INFINITY or soft >= need:
+        return soft
+    if hard != resource.RLIM_INFINITY and hard < need:
+        raise ConfigError(
+            f"--robots {robots}: the world-server holds a connection per agent, about {need} open "
+            f"files, but this system allows {hard} (ulimit -Hn); at most about {max(0, hard - FD_BASE)} "
+            f"robots fit. Raise the hard limit (/etc/security/limits.conf, or LimitNOFILE= in a "
+            f"systemd unit)")
+    new = hard if hard == resource.RLIM_INFINITY else max(need, min(hard, 1 << 20))
+    resource.setrlimit(resource.RLIMIT_NOFILE, (new, hard))
+    return new
+
+
 def run_local(scenario: AnyScenario, *, run_name: str | None, out_root: Path, realtime: bool,
               quiet: bool, join_timeout_s: float = 180.0, null_brains: bool = False,
               view: bool = False, view_http: str = "127.0.0.1:8765", record: str | None = None,
               record_messages: bool = False, particles: int = 0) -> int:
     check_memory(scenario.robots, scenario.family, mem_available_mib())  # before anything starts
+    ensure_open_files(scenario.robots)
     run = run_name or f"{scenario.name}-{scenario.label}-s{scenario.seed}-{secrets.token_hex(3)}".replace(".", "_")
     out = out_root / run
     out.mkdir(parents=True, exist_ok=True)

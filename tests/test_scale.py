@@ -467,6 +467,31 @@ def test_swarmloc_run_refuses_robots_beyond_memory_before_starting(tmp_path):
     assert not (tmp_path / "runs").exists(), "nothing started: not even a run folder"
 
 
+def test_swarmloc_run_refuses_robots_beyond_the_open_file_limit_before_starting(tmp_path):
+    # a system whose hard limit is 512 open files: 600 agents cannot connect to one world (the
+    # default soft limit of 1,024 is what stopped a 1,000-agent world after start-up, issue 47)
+    import resource
+    import subprocess
+    import sys
+
+    def low_limit():
+        resource.setrlimit(resource.RLIMIT_NOFILE, (512, 512))
+
+    done = subprocess.run([sys.executable, "-m", "swarmloc", "run", "ES3-tiled", "--robots", "600",
+                           "--out", str(tmp_path / "runs")], cwd=tmp_path, capture_output=True, text=True,
+                          timeout=120, preexec_fn=low_limit, check=False)
+    assert done.returncode == 2, done.stderr[-2000:]
+    assert "--robots 600" in done.stderr and "this system allows 512 (ulimit -Hn)" in done.stderr
+    assert "at most about 256 robots fit" in done.stderr
+    assert not (tmp_path / "runs").exists(), "nothing started: not even a run folder"
+    # below the hard limit the soft one is raised for the pieces, which inherit it
+    code = ("import resource; resource.setrlimit(resource.RLIMIT_NOFILE, (300, 4096)); "
+            "from swarmloc.deploy.run import ensure_open_files; print(ensure_open_files(600), "
+            "resource.getrlimit(resource.RLIMIT_NOFILE)[0])")
+    raised = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=True)
+    assert raised.stdout.split() == ["4096", "4096"]
+
+
 def test_agent_server_stopped_before_it_forks_exits_and_forks_nothing(tmp_path):
     # `swarmloc run` starts the server before the world and hands it the world's endpoint on
     # stdin; a run stopped before that (the world failed to start, Ctrl-C) must not leave it waiting.
