@@ -284,7 +284,8 @@ def write_report(rows: list[dict], out_dir: str | Path, replay_first=None,
                 text += [(f"NIS of the {kind} updates (2 degrees of freedom: 2 if the filter's "
                           "innovations are as large as it expects), mean over the updates, and the "
                           "share inside the chi-square 95 % band; the localizers that tally it "
-                          "(CoLo's)."), "", f"{kind.capitalize()} NIS mean", "",
+                          "(CoLo's estimators, the EKFs, the hybrid while its EKF tracks)."), "",
+                         f"{kind.capitalize()} NIS mean", "",
                          format_table(tallied, robot_ids, f"{kind}_nis_mean", "{:.2f}"), ""]
         if any(math.isfinite(v["ape_rmse_m"]) for _, sc in tracking for v in sc.values()):
             text += [("evo's absolute and relative trajectory errors (translation, RMSE, no "
