@@ -150,11 +150,17 @@ def main_scenarios(args) -> int:
 
 
 def main_router(args) -> int:
-    from swarmloc.protocol.session import bound_endpoints, open_session, session_config
+    from swarmloc.protocol.session import (
+        ROUTER_MIN_SESSIONS,
+        bound_endpoints,
+        open_session,
+        session_config,
+    )
 
     stop = _install_stop()
     config = session_config(mode="router", listen=args.listen or ["tcp/127.0.0.1:7447"],
-                            connect=args.connect or (), config_file=args.config)
+                            connect=args.connect or (), config_file=args.config,
+                            min_sessions=ROUTER_MIN_SESSIONS)
     with open_session(config) as session:
         endpoints = bound_endpoints(session)
         if args.announce:
@@ -167,7 +173,12 @@ def main_router(args) -> int:
 
 def main_world(args) -> int:
     from swarmloc.protocol.keys import Keys
-    from swarmloc.protocol.session import bound_endpoints, config_from_args, open_session
+    from swarmloc.protocol.session import (
+        SESSION_MARGIN,
+        bound_endpoints,
+        config_from_args,
+        open_session,
+    )
     from swarmloc.world.server import WorldServer
     from swarmloc.world.service import served_world
 
@@ -192,7 +203,7 @@ def main_world(args) -> int:
         tmp.write_text(json.dumps({**result, **labels}, indent=2))
         os.replace(tmp, out / "results.json")
 
-    with open_session(config_from_args(args)) as session:
+    with open_session(config_from_args(args, min_sessions=scenario.robots + SESSION_MARGIN)) as session:
         from swarmloc.deploy.observe.tap import WorldTap
         from swarmloc.families import FAMILIES
 

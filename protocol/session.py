@@ -116,6 +116,7 @@ def session_config(
     multicast_scouting: bool | None = False,
     admin_space: bool | None = None,
     shared_memory: bool | None = False,
+    min_sessions: int | None = None,
 ) -> zenoh.Config:
     """A ``zenoh.Config`` for the transport flags.
 
@@ -132,7 +133,12 @@ def session_config(
     - ``shared_memory``: the shared-memory transport on or off (default off); None leaves the
       file's setting;
     - a client with connect endpoints waits for its router (``connect/timeout_ms: -1``) unless
-      the file sets a timeout.
+      the file sets a timeout;
+    - ``min_sessions``: Zenoh's ``transport/unicast/max_sessions`` raised to at least this. Its
+      default, 1,000, refused the 1,000th connection to a world-server ("close message (reason
+      INVALID) in response to an OpenSyn"): a 1,000-agent run lost an agent at start-up and
+      ended with exit 3 (issue 47). The world asks for its robots and a margin, a router for
+      :data:`ROUTER_MIN_SESSIONS`.
 
     Raises ValueError naming the flag (``-m/--mode``, ``-e/--connect``, ``-l/--listen``,
     ``-c/--config``) for a bad value.
@@ -170,6 +176,10 @@ def session_config(
         and json.loads(config.get_json("connect/timeout_ms")) is None
     ):
         _insert(config, "connect/timeout_ms", -1)
+    if min_sessions is not None:
+        current = json.loads(config.get_json("transport/unicast/max_sessions")) or 0
+        if current < min_sessions:
+            _insert(config, "transport/unicast/max_sessions", int(min_sessions))
     if _uses_tls(config):
         from swarmloc.protocol.tls import check_tls
 
@@ -212,9 +222,17 @@ def _load_config_file(config_file: str | os.PathLike) -> zenoh.Config:
         raise ValueError(f"-c/--config: cannot load {path!r}: {error}") from None
 
 
-def config_from_args(args: argparse.Namespace) -> zenoh.Config:
+#: Sessions a standalone router accepts at least (Zenoh's default is 1,000): every agent of a
+#: deployment through a router is one.
+ROUTER_MIN_SESSIONS = 20_000
+#: Sessions a world-server accepts beside one per robot (observers, the router, restarts).
+SESSION_MARGIN = 64
+
+
+def config_from_args(args: argparse.Namespace, min_sessions: int | None = None) -> zenoh.Config:
     """The session configuration for flags added by :func:`add_transport_args`."""
     return session_config(
+        min_sessions=min_sessions,
         mode=args.mode,
         connect=args.connect or (),
         listen=args.listen or (),

@@ -744,6 +744,18 @@ def test_session_config_turns_shared_memory_off_unless_told(tmp_path):
     assert _get(session_config(config_file=on, shared_memory=None), "transport/shared_memory/enabled") is True
 
 
+def test_session_config_raises_zenohs_session_limit_for_a_large_swarm(tmp_path):
+    # Zenoh accepts 1,000 sessions by default: the 1,000th agent of a world was refused
+    # ("close message (reason INVALID) in response to an OpenSyn") and the run ended with exit 3
+    assert _get(zenoh.Config(), "transport/unicast/max_sessions") == 1000, "Zenoh's default"
+    assert _get(session_config(), "transport/unicast/max_sessions") == 1000
+    assert _get(session_config(min_sessions=1064), "transport/unicast/max_sessions") == 1064
+    assert _get(session_config(min_sessions=10), "transport/unicast/max_sessions") == 1000  # never lowered
+    more = tmp_path / "sessions.json5"
+    more.write_text('{transport: {unicast: {max_sessions: 5000}}}')
+    assert _get(session_config(config_file=more, min_sessions=1064), "transport/unicast/max_sessions") == 5000
+
+
 @pytest.mark.parametrize(
     "endpoint",
     [
