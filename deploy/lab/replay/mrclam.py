@@ -79,6 +79,18 @@ def plot_name(label: str) -> str:
     return label.replace("+", "_").replace(" ", "_")
 
 
+def _save(fig, path: Path) -> Path:
+    """Write a report figure to ``path`` (its folder made) and free it."""
+    import matplotlib.pyplot as plt
+
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
 def plot_consistency(result: ReplayResult, path: Path, title: str | None = None) -> Path | None:
     """Each robot's position NEES (with the chi-square 95 % bound; a 5 s running median, the
     ticks are strongly correlated) and the trace of its position covariance over time, as CoLo-AT
@@ -110,12 +122,7 @@ def plot_consistency(result: ReplayResult, path: Path, title: str | None = None)
     bottom.set_ylabel("trace of P_xy [m^2]")
     bottom.set_xlabel("time [s]")
     top.set_title(title or f"{result.config.label}: consistency over time", fontsize=9)
-    fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
-    plt.close(fig)
-    return path
+    return _save(fig, path)
 
 
 def plot_trajectories(result: ReplayResult, dataset: MrclamDataset, path: Path,
@@ -141,12 +148,7 @@ def plot_trajectories(result: ReplayResult, dataset: MrclamDataset, path: Path,
     ax.set_title(title or f"{dataset.name}: {result.config.label} (solid) vs Vicon (dotted)",
                  fontsize=9)
     ax.legend(fontsize=7, loc="upper right")
-    fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
-    plt.close(fig)
-    return path
+    return _save(fig, path)
 
 
 def format_table(rows: Sequence[tuple[str, dict[int, dict[str, float]]]],
