@@ -374,6 +374,17 @@ RAB_MAX_BYTES = (_T_RAB_HEAD.shape[0] + 9 + _T_RANGE.shape[0] + 9 + _T_BEARING.s
                  + _T_PAYLOAD.shape[0] + 2 + MAX_RAB_PAYLOAD_BYTES)
 
 
+@njit(cache=True, inline="always", error_model="numpy")
+def _put_f64_row(out, pos, row, lo, hi):
+    """Every value of ``row`` as msgpack float64 from ``out[pos]``; -1 if one is outside
+    ``[lo, hi]`` or NaN."""
+    for c in range(row.shape[0]):
+        if not (lo <= row[c] <= hi):
+            return -1
+        pos = _put_f64(out, pos, row[c])
+    return pos
+
+
 @njit(cache=True, error_model="numpy")
 def encode_senses(tick, robots, encoder, ir, ground, d_sender, d_receiver, d_range, d_bearing,
                   payloads, payload_len, out, offsets):
@@ -429,21 +440,16 @@ def encode_senses(tick, robots, encoder, ir, ground, d_sender, d_receiver, d_ran
         pos = _put_uint(out, pos, tick)
         pos = _put_token(out, pos, _T_ROBOT_ID)
         pos = _put_uint(out, pos, r)
-        pos = _put_token(out, pos, _T_ENCODER)
-        for c in range(2):
-            if not (_ENC_LO <= encoder[r, c] <= _ENC_HI):
-                return -1
-            pos = _put_f64(out, pos, encoder[r, c])
-        pos = _put_token(out, pos, _T_IR)
-        for c in range(8):
-            if not (_IR_LO <= ir[r, c] <= _IR_HI):
-                return -1
-            pos = _put_f64(out, pos, ir[r, c])
-        pos = _put_token(out, pos, _T_GROUND)
-        for c in range(3):
-            if not (_GROUND_LO <= ground[r, c] <= _GROUND_HI):
-                return -1
-            pos = _put_f64(out, pos, ground[r, c])
+        # a reading out of its bounds (or not finite): encode raises, so refuse
+        pos = _put_f64_row(out, _put_token(out, pos, _T_ENCODER), encoder[r], _ENC_LO, _ENC_HI)
+        if pos < 0:
+            return -1
+        pos = _put_f64_row(out, _put_token(out, pos, _T_IR), ir[r], _IR_LO, _IR_HI)
+        if pos < 0:
+            return -1
+        pos = _put_f64_row(out, _put_token(out, pos, _T_GROUND), ground[r], _GROUND_LO, _GROUND_HI)
+        if pos < 0:
+            return -1
         pos = _put_token(out, pos, _T_RECEIVED)
         if k <= 15:
             out[pos] = np.uint8(0x90 | k)
