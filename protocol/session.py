@@ -26,11 +26,13 @@ Explicit arguments override the config file; an argument left at None leaves the
 from __future__ import annotations
 
 import argparse
+import ctypes
 import functools
 import ipaddress
 import json
 import os
 import re
+import threading
 from collections.abc import Iterable
 
 import zenoh
@@ -278,3 +280,24 @@ def bound_endpoints(session: zenoh.Session, timeout_s: float = 2.0) -> list[str]
         f"no admin space answer from session {zid}: open it with the admin space enabled "
         "(session_config(..., admin_space=True))"
     )
+
+
+_pinned = threading.local()
+
+
+def keep_thread_state() -> None:
+    """Keep the calling thread's Python thread state alive after this callback returns.
+
+    For a callback that Zenoh runs on its own (Rust) thread (``zenoh.handlers.Callback(...,
+    indirect=False)``). Each such call takes the GIL through ``PyGILState_Ensure``; on a thread
+    Python does not know, that creates a thread state and ``PyGILState_Release`` deletes it at
+    the end, so every message paid for a new thread state and its frame stack (an mmap and a
+    munmap, whose TLB shootdown interrupts the other core). One extra ``PyGILState_Ensure``,
+    never released, keeps the count above zero: later calls reuse the state (the C API's own
+    idiom for foreign threads that call into Python repeatedly). Cheap after the first call: a
+    thread-local lookup. Measured in issue 47 (benchmarks/bench_scale.py, 300 real-time agents:
+    the world-server's Zenoh thread 250 -> 200 ms of CPU a second).
+    """
+    if not getattr(_pinned, "done", False):
+        ctypes.pythonapi.PyGILState_Ensure()
+        _pinned.done = True

@@ -30,6 +30,7 @@ import zenoh
 
 from swarmloc.protocol.errors import ErrorCounter
 from swarmloc.protocol.keys import Keys
+from swarmloc.protocol.session import keep_thread_state
 from swarmloc.protocol.messages import (
     ErrorReport,
     Join,
@@ -231,7 +232,21 @@ class WorldServer:
     def declare(self) -> None:
         s, k = self.session, self.keys
         self._decls.append(s.declare_queryable(k.join, self._on_join))
-        self._decls.append(s.declare_subscriber(k.act_all, self._on_act))
+        if getattr(self.world, "ONE_THREAD_TRANSPORT", False):
+            # Zenoh on one thread (deploy/launch.py: use_one_thread_runtime, which the world's
+            # CLI applies for such a world): the Acts are decoded on that thread, which keeps
+            # its Python thread state. The default hands every Act to a Python thread of its own
+            # through a channel: a wake-up and a GIL hand-over per Act. 300 real-time agents,
+            # the world's CPU: 430 ms a second on Zenoh's default pools with that hand-over,
+            # 237 so (benchmarks/bench_scale.py, issue 47).
+            def on_act(sample: zenoh.Sample) -> None:
+                keep_thread_state()
+                self._on_act(sample)
+
+            act_handler = zenoh.handlers.Callback(on_act, indirect=False)
+        else:  # several Zenoh threads would contend for the GIL: one Python thread takes them
+            act_handler = self._on_act
+        self._decls.append(s.declare_subscriber(k.act_all, act_handler))
         self._decls.append(s.liveliness().declare_subscriber(k.alive_all, self._on_alive, history=True))
         self._sense_pub = [
             s.declare_publisher(k.sense(i), congestion_control=zenoh.CongestionControl.BLOCK)
