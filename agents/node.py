@@ -28,7 +28,6 @@ import zenoh
 from swarmloc.agents.brains import AgentBrain, BrainError, brain_from_welcome
 from swarmloc.protocol.errors import ErrorCounter
 from swarmloc.protocol.keys import Keys
-from swarmloc.protocol.session import keep_thread_state
 from swarmloc.protocol.messages import (
     ErrorReport,
     Join,
@@ -38,6 +37,7 @@ from swarmloc.protocol.messages import (
     decode,
     encode,
 )
+from swarmloc.protocol.session import keep_thread_state
 
 log = logging.getLogger("swarmloc.agent")
 

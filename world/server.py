@@ -30,7 +30,6 @@ import zenoh
 
 from swarmloc.protocol.errors import ErrorCounter
 from swarmloc.protocol.keys import Keys
-from swarmloc.protocol.session import keep_thread_state
 from swarmloc.protocol.messages import (
     ErrorReport,
     Join,
@@ -40,6 +39,7 @@ from swarmloc.protocol.messages import (
     decode,
     encode,
 )
+from swarmloc.protocol.session import keep_thread_state
 from swarmloc.world.service import ServedWorld
 
 log = logging.getLogger("swarmloc.world")
