@@ -8,9 +8,11 @@ memory of the run's processes (``/proc/PID/smaps_rollup``), and prints one line 
 - ticks/s over the window, overruns and late Acts in the window, messages rejected so far;
 - the world's mean tick time over the window, and its tick p50 / p99 so far (cumulative: the
   world keeps every tick's duration);
-- PSS of the world, of all agents together, of the agent server (``swarmloc agents``, which
-  forks them), and of the whole tree; the world's RSS. A local run has no router: agents and
-  world meet in peer mode, so there is no router process to measure.
+- PSS of the world, of the run's router, of all agents together, of the agent server
+  (``swarmloc agents``, which forks them), and of the whole tree; the world's RSS (read one
+  process per :data:`bench_scale.MEMORY_PACE_S`, so that reading 300 agents does not stall the
+  run it measures);
+- the run's metrics so far: round trips nest-prey-nest, robots that found both goals.
 
 It ends by comparing the first and the last window (after the first, which includes start-up):
 ticks/s and the memory figures, as ratios. No growth beyond noise is the target.
@@ -30,7 +32,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_scale import Run, descendants, memory_kib, parents, pieces
+from bench_scale import MEMORY_PACE_S, Run, cmdline, descendants, memory_kib, parents, pieces
 
 
 def snapshot(run: Run) -> dict:
@@ -42,7 +44,12 @@ def snapshot(run: Run) -> dict:
     parent = parents()
     agents, world = pieces(run.proc.pid, parent)
     tree = [run.proc.pid, *descendants(run.proc.pid, parent)]
-    mem = {pid: memory_kib(pid) for pid in tree}
+    mem = {}
+    for pid in tree:
+        mem[pid] = memory_kib(pid)
+        time.sleep(MEMORY_PACE_S)  # pacing, not a readiness wait
+    router = next((p for p in tree if parent.get(p) == run.proc.pid and "router" in cmdline(p)[3:4]), None)
+    metrics = t.get("metrics", {})
     pss = {pid: m[0] for pid, m in mem.items() if m}
     servers = {parent[a] for a in agents if parent.get(a) not in (None, run.proc.pid)}
     tr = t.get("transport", {})
@@ -52,7 +59,8 @@ def snapshot(run: Run) -> dict:
             "pss_world": pss.get(world, 0) if world else 0,
             "rss_world": (mem.get(world) or (0, 0))[1] if world else 0,
             "pss_agents": sum(pss.get(p, 0) for p in agents), "pss_server": sum(pss.get(p, 0) for p in servers),
-            "pss_tree": sum(pss.values())}
+            "pss_router": pss.get(router, 0) if router else 0, "pss_tree": sum(pss.values()),
+            "round_trips": metrics.get("round_trips_total", 0), "found_both": metrics.get("robots_found_both", 0)}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -80,7 +88,8 @@ def _soak(run: Run, args) -> int:
         return 1
     print(f"{args.robots} agents joined in {joined:.1f} s; windows of {args.window_min:g} min", flush=True)
     print(f"{'min':>5} {'ticks/s':>8} {'overruns':>8} {'late':>6} {'rejected':>8} {'mean ms':>7} {'p50 ms':>7} {'p99 ms':>7} "
-          f"{'world PSS MiB':>13} {'world RSS MiB':>13} {'agents PSS MiB':>14} {'server PSS MiB':>14} {'tree PSS MiB':>12}", flush=True)
+          f"{'world PSS MiB':>13} {'world RSS MiB':>13} {'router PSS MiB':>14} {'agents PSS MiB':>14} {'server PSS MiB':>14} "
+          f"{'tree PSS MiB':>12} {'round trips':>11} {'found both':>10}", flush=True)
     windows = []
     previous = {}
     while not previous and run.proc.poll() is None:
@@ -101,11 +110,13 @@ def _soak(run: Run, args) -> int:
              "overruns": now["overruns"] - previous["overruns"], "late": now["late"] - previous["late"],
              "mean_ms": ((now["tick_ms_sum"] - previous["tick_ms_sum"]) / (now["ticks"] - previous["ticks"])
                          if now["ticks"] > previous["ticks"] else 0.0),
-             **{k: now[k] for k in ("rejected", "p50", "p99", "pss_world", "rss_world", "pss_agents", "pss_server", "pss_tree")}}
+             **{k: now[k] for k in ("rejected", "p50", "p99", "pss_world", "rss_world", "pss_router", "pss_agents",
+                                    "pss_server", "pss_tree", "round_trips", "found_both")}}
         windows.append(w)
         print(f"{w['min']:5.1f} {w['ticks_per_s']:8.2f} {w['overruns']:8d} {w['late']:6d} {w['rejected']:8d} {w['mean_ms']:7.1f} "
               f"{w['p50'] or 0:7.1f} {w['p99'] or 0:7.1f} {w['pss_world'] / 1024:13.1f} {w['rss_world'] / 1024:13.1f} "
-              f"{w['pss_agents'] / 1024:14.1f} {w['pss_server'] / 1024:14.1f} {w['pss_tree'] / 1024:12.1f}", flush=True)
+              f"{w['pss_router'] / 1024:14.1f} {w['pss_agents'] / 1024:14.1f} {w['pss_server'] / 1024:14.1f} "
+              f"{w['pss_tree'] / 1024:12.1f} {w['round_trips']:11d} {w['found_both']:10d}", flush=True)
         previous = now
     run.close_watch()
     code = run.proc.wait()
@@ -113,7 +124,8 @@ def _soak(run: Run, args) -> int:
     if len(steady) >= 2:
         a, b = steady[0], steady[-1]
         print("last window / first steady window: " + ", ".join(
-            f"{k} {b[k] / a[k]:.3f}" for k in ("ticks_per_s", "pss_world", "rss_world", "pss_agents", "pss_server", "pss_tree")
+            f"{k} {b[k] / a[k]:.3f}" for k in ("ticks_per_s", "pss_world", "rss_world", "pss_router", "pss_agents",
+                                               "pss_server", "pss_tree")
             if a[k]))
     print(f"swarmloc run exited {code}")
     return 0 if code == 0 else 1

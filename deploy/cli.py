@@ -203,15 +203,11 @@ def main_world(args) -> int:
         tmp.write_text(json.dumps({**result, **labels}, indent=2))
         os.replace(tmp, out / "results.json")
 
-    served = served_world(scenario)
-    if getattr(served, "ONE_THREAD_TRANSPORT", False):
-        from swarmloc.deploy.launch import use_one_thread_runtime
-
-        use_one_thread_runtime()
     with open_session(config_from_args(args, min_sessions=scenario.robots + SESSION_MARGIN)) as session:
         from swarmloc.deploy.observe.tap import WorldTap
         from swarmloc.families import FAMILIES
 
+        served = served_world(scenario)
         viewable = FAMILIES.get(scenario.family).frames is not None
         if args.record and not viewable:
             raise ConfigError(f"--record: family {scenario.family!r} has no frame source (Family.frames), "

@@ -32,21 +32,11 @@ CHILD_ENV = {"PYTHONUNBUFFERED": "1", "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THRE
 #: pools cost more than they save (100 agents of ES3: 37.1 -> 39.4 ticks/s, three pairs of
 #: 600-tick runs). Other pieces keep the defaults: on one thread a single 300 KB message (a vision
 #: image) stalled that thread past the link lease, and the world lost every agent's liveliness;
-#: A world-server whose messages are all small (``ONE_THREAD_TRANSPORT`` on its served world: the
-#: e-puck family) runs on it too, and decodes its Acts on that thread (world/server.py): with 300
-#: real-time agents its CPU went from 430 to 237 ms a second, the wake-ups of its Zenoh threads
-#: from about 9,000 to 1,000 a second (issue 47). A ZENOH_RUNTIME set by the user wins.
+#: the world-server itself gains nothing measurable from it. A ZENOH_RUNTIME set by the user wins.
 ONE_THREAD_ZENOH_RUNTIME = (
     "(rx: (handover: app), net: (handover: app), acc: (handover: app), tx: (handover: app), "
     "app: (worker_threads: 1))"
 )
-
-
-def use_one_thread_runtime() -> None:
-    """Run this process's Zenoh on one thread (:data:`ONE_THREAD_ZENOH_RUNTIME`) unless the user
-    set ``ZENOH_RUNTIME``. Zenoh reads the variable when the process opens its first session:
-    call this before."""
-    os.environ.setdefault("ZENOH_RUNTIME", ONE_THREAD_ZENOH_RUNTIME)
 
 
 @dataclass

@@ -295,8 +295,9 @@ def keep_thread_state() -> None:
     munmap, whose TLB shootdown interrupts the other core). One extra ``PyGILState_Ensure``,
     never released, keeps the count above zero: later calls reuse the state (the C API's own
     idiom for foreign threads that call into Python repeatedly). Cheap after the first call: a
-    thread-local lookup. Measured in issue 47 (benchmarks/bench_scale.py, 300 real-time agents:
-    the world-server's Zenoh thread 250 -> 200 ms of CPU a second).
+    thread-local lookup. Measured in issue 47 (benchmarks/bench_scale.py, 300 real-time agents,
+    two pairs of runs: the agents' CPU 0.56-0.58 -> 0.52-0.53 cores; a one-thread world-server
+    decoding its Acts on Zenoh's thread, 250 -> 200 ms a second).
     """
     if not getattr(_pinned, "done", False):
         ctypes.pythonapi.PyGILState_Ensure()

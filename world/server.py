@@ -22,6 +22,7 @@ import gc
 import logging
 import threading
 import time
+from array import array
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -39,11 +40,14 @@ from swarmloc.protocol.messages import (
     decode,
     encode,
 )
-from swarmloc.protocol.session import keep_thread_state
 from swarmloc.world.service import ServedWorld
 
 log = logging.getLogger("swarmloc.world")
 
+#: Real time: how often the loop takes the Acts from Zenoh's queue while it waits for them, and
+#: how many the queue holds (Zenoh's receiving threads wait when it is full).
+ACT_POLL_S = 0.0005
+ACT_QUEUE = 1 << 16
 #: Overruns whose details a run keeps (:attr:`TickStats.overrun_ticks`).
 MAX_OVERRUNS_KEPT = 20
 
@@ -54,7 +58,10 @@ class TickStats:
     started_s: float = 0.0
     cpu_started_s: float = 0.0  # process CPU time (every thread, Zenoh's too) when ticking began
     tap_cpu_s: float = 0.0  # the world thread's CPU time inside the observer tap's calls
-    tick_durations_s: list = field(default_factory=list)
+    #: Every tick's duration and phases, 8 bytes each (``array('d')``): a run of an hour keeps
+    #: 36,000 ticks, 1.2 MB in all; as lists of floats they took four times that, a steady
+    #: growth the soak benchmark saw in the world's memory (benchmarks/bench_soak.py, issue 47).
+    tick_durations_s: array = field(default_factory=lambda: array("d"))
     late_acts: int = 0  # live robots whose act missed its tick (deadline or lockstep timeout)
     stale_acts: int = 0  # acts that arrived after their tick was closed
     overruns: int = 0
@@ -70,7 +77,7 @@ class TickStats:
     #: next tick started (ms), for diagnosis (results.json: transport.overrun_ticks)
     overrun_ticks: list = field(default_factory=list)
     #: where each tick went: computing and putting the Senses, waiting for the Acts, stepping
-    phases_s: dict = field(default_factory=lambda: {"sense_put": [], "collect": [], "step": []})
+    phases_s: dict = field(default_factory=lambda: {p: array("d") for p in ("sense_put", "collect", "step")})
 
     def summary(self) -> dict:
         d = np.array(self.tick_durations_s) if self.tick_durations_s else np.zeros(1)
@@ -99,7 +106,7 @@ class TickStats:
             "rejoins": self.rejoins,
             "rejoin_away_s_max": round(max(self.rejoin_away_s), 3) if self.rejoin_away_s else None,
             "overrun_ticks": self.overrun_ticks,
-            **{f"{phase}_ms_p{q}": round(float(np.percentile(v, q)) * 1e3, 3) if v else None
+            **{f"{phase}_ms_p{q}": round(float(np.percentile(np.array(v), q)) * 1e3, 3) if v else None
                for phase, v in self.phases_s.items() for q in (50, 99)},
         }
 
@@ -154,6 +161,7 @@ class WorldServer:
         self._acts: list = [None] * n
         self._stop = threading.Event()
         self._decls = []
+        self._act_queue = None  # real time: Zenoh's queue of Acts, drained by _collect_polled
 
     # -- Zenoh callbacks (run on Zenoh's threads) --------------------------------------------
 
@@ -232,21 +240,15 @@ class WorldServer:
     def declare(self) -> None:
         s, k = self.session, self.keys
         self._decls.append(s.declare_queryable(k.join, self._on_join))
-        if getattr(self.world, "ONE_THREAD_TRANSPORT", False):
-            # Zenoh on one thread (deploy/launch.py: use_one_thread_runtime, which the world's
-            # CLI applies for such a world): the Acts are decoded on that thread, which keeps
-            # its Python thread state. The default hands every Act to a Python thread of its own
-            # through a channel: a wake-up and a GIL hand-over per Act. 300 real-time agents,
-            # the world's CPU: 430 ms a second on Zenoh's default pools with that hand-over,
-            # 237 so (benchmarks/bench_scale.py, issue 47).
-            def on_act(sample: zenoh.Sample) -> None:
-                keep_thread_state()
-                self._on_act(sample)
-
-            act_handler = zenoh.handlers.Callback(on_act, indirect=False)
-        else:  # several Zenoh threads would contend for the GIL: one Python thread takes them
-            act_handler = self._on_act
-        self._decls.append(s.declare_subscriber(k.act_all, act_handler))
+        # The Acts never run Python on Zenoh's receiving threads: a world that received and routed
+        # on one thread (Zenoh's one-thread runtime, the Acts decoded on it) used 45 % less CPU
+        # at 300 agents, but tests/test_fuzz.py's flood stalled it behind a slow agent's link and
+        # the flooding session closed its transport (docs/design.md, "600 agents", issue 47).
+        if self.realtime:  # queued, drained by the loop itself (_collect_polled)
+            self._act_queue = s.declare_subscriber(k.act_all, zenoh.handlers.FifoChannel(ACT_QUEUE))
+            self._decls.append(self._act_queue)
+        else:
+            self._decls.append(s.declare_subscriber(k.act_all, self._on_act))
         self._decls.append(s.liveliness().declare_subscriber(k.alive_all, self._on_alive, history=True))
         self._sense_pub = [
             s.declare_publisher(k.sense(i), congestion_control=zenoh.CongestionControl.BLOCK)
@@ -292,6 +294,8 @@ class WorldServer:
 
     def _collect(self, tick_started: float) -> None:
         """Wait for this tick's acts; return when all live robots answered or time is up."""
+        if self._act_queue is not None:
+            return self._collect_polled(tick_started + self.world.tick_s)
         if self.realtime:
             deadline = tick_started + self.world.tick_s
         else:
@@ -307,6 +311,33 @@ class WorldServer:
                         log.warning("tick %d: no act from robots %s", self._current_tick, np.flatnonzero(waiting).tolist())
                     break
                 self._cond.wait(left)
+
+    def _collect_polled(self, deadline: float) -> None:
+        """The real-time collection: the loop takes the Acts from Zenoh's queue itself, every
+        :data:`ACT_POLL_S` until all are in or the period is over.
+
+        Handed to a Python callback thread one by one (the lockstep way), each Act cost a
+        wake-up and a GIL hand-over, about 40 µs of the world's CPU, and at 600 agents the world
+        used twice the plain-Zenoh floor's CPU. Zenoh's receiving threads only queue (they never
+        wait on Python: a flood cannot stall them, tests/test_fuzz.py), and the loop wakes at
+        most once per poll, whatever the number of Acts. The poll delays a tick's end by under
+        ``ACT_POLL_S``, nothing next to the real-time period, but would cost lockstep runs of
+        a few agents (1-2 ms ticks) a third of their rate: they keep the callback.
+        """
+        queue = self._act_queue
+        while True:
+            sample = queue.try_recv()
+            while sample is not None:
+                self._on_act(sample)
+                sample = queue.try_recv()
+            with self._cond:
+                waiting = self.world.alive & self._live & ~self._got
+            if not waiting.any() or self._stop.is_set():
+                return
+            left = deadline - time.monotonic()
+            if left <= 0:
+                return
+            time.sleep(min(ACT_POLL_S, left))  # the poll's period, not a readiness wait
 
     def _await_any_agent(self) -> bool:
         """With no live agent nothing can happen in the run: pause (e.g. while the router

@@ -38,9 +38,6 @@ class ForagingService:
 
     family = "foraging"
     act_type = EpuckAct
-    #: Every Sense and Act is a few hundred bytes: the world-server runs Zenoh on one thread and
-    #: decodes the Acts on it (world/server.py: WorldServer.declare).
-    ONE_THREAD_TRANSPORT = True
 
     def __init__(self, world) -> None:
         self.world = world
