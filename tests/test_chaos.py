@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-from bench_chaos import account, checks, run_chaos  # noqa: E402
+from bench_chaos import account, checks, run_chaos
 
 
 @pytest.mark.integration
