@@ -44,10 +44,6 @@ from swarmloc.world.service import ServedWorld
 
 log = logging.getLogger("swarmloc.world")
 
-#: Real time: how often the loop takes the Acts from Zenoh's queue while it waits for them, and
-#: how many the queue holds (Zenoh's receiving threads wait when it is full).
-ACT_POLL_S = 0.0005
-ACT_QUEUE = 1 << 16
 #: Overruns whose details a run keeps (:attr:`TickStats.overrun_ticks`).
 MAX_OVERRUNS_KEPT = 20
 
@@ -161,7 +157,6 @@ class WorldServer:
         self._acts: list = [None] * n
         self._stop = threading.Event()
         self._decls = []
-        self._act_queue = None  # real time: Zenoh's queue of Acts, drained by _collect_polled
 
     # -- Zenoh callbacks (run on Zenoh's threads) --------------------------------------------
 
@@ -244,11 +239,7 @@ class WorldServer:
         # on one thread (Zenoh's one-thread runtime, the Acts decoded on it) used 45 % less CPU
         # at 300 agents, but tests/test_fuzz.py's flood stalled it behind a slow agent's link and
         # the flooding session closed its transport (docs/design.md, "600 agents", issue 47).
-        if self.realtime:  # queued, drained by the loop itself (_collect_polled)
-            self._act_queue = s.declare_subscriber(k.act_all, zenoh.handlers.FifoChannel(ACT_QUEUE))
-            self._decls.append(self._act_queue)
-        else:
-            self._decls.append(s.declare_subscriber(k.act_all, self._on_act))
+        self._decls.append(s.declare_subscriber(k.act_all, self._on_act))
         self._decls.append(s.liveliness().declare_subscriber(k.alive_all, self._on_alive, history=True))
         self._sense_pub = [
             s.declare_publisher(k.sense(i), congestion_control=zenoh.CongestionControl.BLOCK)
@@ -294,8 +285,6 @@ class WorldServer:
 
     def _collect(self, tick_started: float) -> None:
         """Wait for this tick's acts; return when all live robots answered or time is up."""
-        if self._act_queue is not None:
-            return self._collect_polled(tick_started + self.world.tick_s)
         if self.realtime:
             deadline = tick_started + self.world.tick_s
         else:
@@ -311,33 +300,6 @@ class WorldServer:
                         log.warning("tick %d: no act from robots %s", self._current_tick, np.flatnonzero(waiting).tolist())
                     break
                 self._cond.wait(left)
-
-    def _collect_polled(self, deadline: float) -> None:
-        """The real-time collection: the loop takes the Acts from Zenoh's queue itself, every
-        :data:`ACT_POLL_S` until all are in or the period is over.
-
-        Handed to a Python callback thread one by one (the lockstep way), each Act cost a
-        wake-up and a GIL hand-over, about 40 µs of the world's CPU, and at 600 agents the world
-        used twice the plain-Zenoh floor's CPU. Zenoh's receiving threads only queue (they never
-        wait on Python: a flood cannot stall them, tests/test_fuzz.py), and the loop wakes at
-        most once per poll, whatever the number of Acts. The poll delays a tick's end by under
-        ``ACT_POLL_S``, nothing next to the real-time period, but would cost lockstep runs of
-        a few agents (1-2 ms ticks) a third of their rate: they keep the callback.
-        """
-        queue = self._act_queue
-        while True:
-            sample = queue.try_recv()
-            while sample is not None:
-                self._on_act(sample)
-                sample = queue.try_recv()
-            with self._cond:
-                waiting = self.world.alive & self._live & ~self._got
-            if not waiting.any() or self._stop.is_set():
-                return
-            left = deadline - time.monotonic()
-            if left <= 0:
-                return
-            time.sleep(min(ACT_POLL_S, left))  # the poll's period, not a readiness wait
 
     def _await_any_agent(self) -> bool:
         """With no live agent nothing can happen in the run: pause (e.g. while the router
