@@ -199,16 +199,17 @@ class Run:
         mean PSS for every agent (:data:`MEMORY_SAMPLE`)."""
         parent = parents()
         agents = pieces(self.proc.pid, parent)[0]
-        others = [p for p in [self.proc.pid, *descendants(self.proc.pid, parent)] if p not in set(agents)]
+        is_agent = set(agents)
+        others = [p for p in [self.proc.pid, *descendants(self.proc.pid, parent)] if p not in is_agent]
         read = agents if sample is None or sample >= len(agents) else agents[:: -(-len(agents) // sample)]
         mine, tree = [], 0
         for pid in [*others, *read]:
             m = memory_kib(pid)
             if m is not None:
-                if pid in others:
-                    tree += m[0]
-                else:
+                if pid in is_agent:
                     mine.append(m)
+                else:
+                    tree += m[0]
             if pace_s:
                 time.sleep(pace_s)  # pacing, not a readiness wait
         if mine:
