@@ -15,7 +15,7 @@ for a run with late overruns the first of them, phase by phase. The memory is re
 (:data:`MEMORY_PACE_S`), after the CPU window, and from :data:`MEMORY_SAMPLE` agents scaled to
 all, so as not to disturb the run. After the sizes
 given it goes on by ``--step`` agents while 10 Hz holds (10.0 ticks/s, p99 under the 100 ms
-period, no overrun after the first second), up to ``--max``, and prints the largest swarm that
+period, no overrun after the first second, at most 1 % of robot-ticks without their Act), up to ``--max``, and prints the largest swarm that
 held. With ``--floor`` each size also runs the plain-Zenoh floor in real time, right after
 (benchmarks/bench_zenoh_floor.py: the same 10 Hz loop, one 100-byte message each way per robot
 and tick, robots that do nothing else, Zenoh configured as swarmloc's e-puck agents): if the
@@ -52,9 +52,14 @@ MEMORY_PACE_S = 0.02
 #: row reads this many agents and counts their mean for each (forked agents are alike: the
 #: --memory table reads every one, max within a few % of the mean).
 MEMORY_SAMPLE = 20
-#: A run holds 10 Hz if it ticks at this rate or more, p99 under the period, no late overrun.
+#: A run holds 10 Hz if it ticks at this rate or more, p99 under the period, no late overrun,
+#: and at most this share of its robot-ticks without their Act (late: the robot kept its previous
+#: command). The last condition is not the issue's (47): since the real-time world ends each
+#: tick inside its slot, as the floor does, a world that dropped Acts could hold by the other
+#: three alone; it applies to the floor too.
 HOLD_TICKS_PER_S = 9.95
 PERIOD_MS = 100.0
+MAX_LATE_SHARE = 0.01
 
 
 def _ppid(pid: int) -> int | None:
@@ -274,26 +279,30 @@ def phases(t: dict) -> str:
         return "-"
 
 
-def holds(t: dict) -> bool:
+def holds(t: dict, n: int) -> bool:
+    """Whether a run of ``n`` robots held 10 Hz (:data:`MAX_LATE_SHARE` says the conditions)."""
     return (t["ticks_per_s"] or 0) >= HOLD_TICKS_PER_S and t["tick_ms_p99"] < PERIOD_MS \
-        and t["overruns_after_1s"] == 0
+        and t["overruns_after_1s"] == 0 and t["late_acts"] <= MAX_LATE_SHARE * n * t["ticks"]
 
 
 def floor_row(n: int, duration_s: float) -> bool:
     """One real-time run of the plain-Zenoh floor with ``n`` robots, printed as a table row;
     whether it held 10 Hz."""
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
-    from bench_zenoh_floor import AS_AGENTS, world
-
+    # In a process of its own: its world runs on the world-server's Zenoh runtime
+    # (bench_zenoh_floor.py --as-agents), which this process, whose watch sessions are open,
+    # could no longer take.
     load_before = load()
-    try:
-        f = world(n, duration_s, "direct", AS_AGENTS, realtime=True)
-    except RuntimeError as exc:
-        print(f"{n:>6} {'floor':>8} failed: {exc}", flush=True)
+    proc = subprocess.run([sys.executable, str(Path(__file__).resolve().parent / "bench_zenoh_floor.py"),
+                           "--robots", str(n), "--duration-s", str(duration_s), "--realtime", "--as-agents",
+                           "--json"], check=False, capture_output=True, text=True, timeout=duration_s * 3 + 300)
+    if proc.returncode != 0:
+        why = (proc.stderr.strip().splitlines() or [f"exit {proc.returncode}"])[-1]
+        print(f"{n:>6} {'floor':>8} failed: {why}", flush=True)
         return False
+    f = json.loads(proc.stdout.strip().splitlines()[-1])
     t = {"ticks_per_s": round(f["ticks_per_s"], 2), "tick_ms_p99": f["p99_ms"],
-         "overruns_after_1s": f["overruns_after_1s"]}
-    ok = holds(t)
+         "overruns_after_1s": f["overruns_after_1s"], "late_acts": f["late_acts"], "ticks": f["ticks"]}
+    ok = holds(t, n)
     cores = f"{f['cores_robots']:.2f}/{f['cores_world']:.2f}"
     print(f"{n:>6} {'floor':>8} {t['ticks_per_s']:>8} {f['p50_ms']:>7.1f} {f['p99_ms']:>7.1f} "
           f"{f['overruns_after_1s']:>11} {f['overruns']:>8} {f['late_acts']:>9} {'-':>9} "
@@ -350,7 +359,7 @@ def swarmloc_row(n: int, scenario: str, duration_s: float, tmp: str) -> bool | N
     if isinstance(t, str):
         print(f"{n:>6} {'swarmloc':>8} failed: {t}")
         return None
-    ok = holds(t)
+    ok = holds(t, n)
     print(f"{n:>6} {'swarmloc':>8} {t['ticks_per_s']:>8} {t['tick_ms_p50']:>7} {t['tick_ms_p99']:>7} "
           f"{t['overruns_after_1s']:>11} {t['overruns']:>8} {t['late_acts']:>9} "
           f"{mib(total) if total else '-':>9} {f'{joined:.1f}' if joined else '-':>8} "

@@ -17,8 +17,10 @@ the robots the settings swarmloc's e-puck agents run with, one at a time: ``--on
 (the Zenoh runtime of ``deploy/launch.py: ONE_THREAD_ZENOH_RUNTIME``), ``--direct-callbacks``
 (the Sense callback on Zenoh's receiving thread, ``indirect=False``, agents/node.py),
 ``--shm-off`` (the shared-memory transport off, for the world too, protocol/session.py);
-``--as-agents`` sets all three, and the robots at nice 5 as ``swarmloc run`` starts agents that
-outnumber the cores: plain Zenoh configured as swarmloc configures it.
+``--as-agents`` sets all three, the robots at nice 5 as ``swarmloc run`` starts agents that
+outnumber the cores, and the world's Zenoh runtime as the world-server's
+(``deploy/launch.py: WORLD_ZENOH_RUNTIME``): plain Zenoh configured as swarmloc configures it.
+``--json`` prints each size's figures as one JSON line (benchmarks/bench_scale.py reads them).
 
 ``--realtime`` ticks at 10 Hz on the wall clock, as the world-server's real-time mode does (a
 tick waits for the answers until its period is over; an answer that comes later is dropped),
@@ -36,6 +38,7 @@ no ticks, their CPU and wake-ups per second. Usage:
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import resource
 import signal
@@ -49,9 +52,12 @@ from dataclasses import dataclass
 
 import zenoh
 
-from swarmloc.deploy.launch import ONE_THREAD_ZENOH_RUNTIME
+from swarmloc.deploy.launch import ONE_THREAD_ZENOH_RUNTIME, WORLD_ZENOH_RUNTIME
 
 PAYLOAD_BYTES = 100
+#: Environment variables the user set before main changed any (a ZENOH_RUNTIME of the user's
+#: reaches the robots too; the world's own does not).
+_USER_ENV = frozenset(os.environ)
 #: The real-time period (the e-puck controller's 10 Hz).
 PERIOD_S = 0.1
 
@@ -193,7 +199,9 @@ def _swarm(n: int, topology: str, settings: Settings):
 
             live = session.liveliness().declare_subscriber(f"floor/{run}/alive/*", on_alive, history=True)
             t0 = time.perf_counter()
-            env = {**os.environ, "ZENOH_RUNTIME": ONE_THREAD_ZENOH_RUNTIME} if settings.one_thread else None
+            # The robots' runtime is theirs alone, never the world's (set in this process by main)
+            env = {**os.environ, "ZENOH_RUNTIME": ONE_THREAD_ZENOH_RUNTIME} if settings.one_thread else \
+                {k: v for k, v in os.environ.items() if k != "ZENOH_RUNTIME" or k in _USER_ENV}
             robots = [subprocess.Popen([sys.executable, __file__, "--robot", str(i), "--connect", robot_ep,
                                         "--run", run, *settings.robot_flags()],
                                        start_new_session=True, stdout=subprocess.PIPE, text=True, env=env)
@@ -347,6 +355,7 @@ def main() -> int:
     parser.add_argument("--nice", type=int, default=0, help="the robots' nice value (--as-agents: 5)")
     parser.add_argument("--realtime", action="store_true", help="tick at 10 Hz on the wall clock")
     parser.add_argument("--idle", action="store_true", help="robots' CPU and wake-ups with no ticks")
+    parser.add_argument("--json", action="store_true", help="each size's figures as one JSON line")
     args = parser.parse_args()
     if args.serve_router:
         return serve_router(args.serve_router)
@@ -354,6 +363,8 @@ def main() -> int:
         if args.nice:
             os.nice(args.nice)
         return robot(args.connect, args.run, args.robot, args.codec, args.direct_callbacks, args.shm_off)
+    if args.as_agents:  # before this process opens its first session, when Zenoh reads it
+        os.environ.setdefault("ZENOH_RUNTIME", WORLD_ZENOH_RUNTIME)
     settings = Settings(codec=args.codec, one_thread=args.one_thread_robots or args.as_agents,
                         direct=args.direct_callbacks or args.as_agents, shm_off=args.shm_off or args.as_agents,
                         nice=args.nice or (AS_AGENTS.nice if args.as_agents else 0))
@@ -363,6 +374,10 @@ def main() -> int:
         for n in args.robots:
             r = idle(n, args.duration_s, settings)
             print(f"{n:>6} {r['cpu_us_per_s']:>14.0f} {r['wakeups_per_s']:>16.1f} {r['threads']:>8}", flush=True)
+        return 0
+    if args.json:
+        for n in args.robots:
+            print(json.dumps(world(n, args.duration_s, args.topology, settings, args.realtime)), flush=True)
         return 0
     print(f"plain Zenoh {'real-time (10 Hz)' if args.realtime else 'lockstep'} floor, topology "
           f"{args.topology}, {PAYLOAD_BYTES}-byte messages{settings.describe()}  ({load()})")

@@ -203,6 +203,9 @@ def main_world(args) -> int:
         tmp.write_text(json.dumps({**result, **labels}, indent=2))
         os.replace(tmp, out / "results.json")
 
+    from swarmloc.deploy.launch import WORLD_ZENOH_RUNTIME
+
+    os.environ.setdefault("ZENOH_RUNTIME", WORLD_ZENOH_RUNTIME)  # read when the first session opens
     with open_session(config_from_args(args, min_sessions=scenario.robots + SESSION_MARGIN)) as session:
         from swarmloc.deploy.observe.tap import WorldTap
         from swarmloc.families import FAMILIES

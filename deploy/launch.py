@@ -37,6 +37,16 @@ ONE_THREAD_ZENOH_RUNTIME = (
     "(rx: (handover: app), net: (handover: app), acc: (handover: app), tx: (handover: app), "
     "app: (worker_threads: 1))"
 )
+#: The world-server's ``ZENOH_RUNTIME`` (deploy/cli.py: main_world sets it before its session
+#: opens; a ZENOH_RUNTIME set by the user wins): the acceptor's pool handed over to the two
+#: receiving workers. With Zenoh's defaults the agents' links were read by three threads (rx-0,
+#: rx-1 and acc-0), each woken about 2,800 times a second at 400 real-time agents; handed over,
+#: two threads woke 1,500-1,700 times each. Measured at 400 agents (issue 47, `/proc` per
+#: thread, 8 s mid-run): the world 412-504 ms of CPU a second (three runs) -> 362-391 (two).
+#: One receiving worker saved no more, and lost up to half of tests/test_fuzz.py's 60,000 bad
+#: Acts in one run of three: a flood that fills the Act queue stops the only thread that reads
+#: the links. The plain-Zenoh floor's world gains nothing from either (19.9 -> 19.7 ms a tick).
+WORLD_ZENOH_RUNTIME = "(acc: (handover: rx))"
 
 
 @dataclass

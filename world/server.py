@@ -46,6 +46,11 @@ log = logging.getLogger("swarmloc.world")
 
 #: Overruns whose details a run keeps (:attr:`TickStats.overrun_ticks`).
 MAX_OVERRUNS_KEPT = 20
+#: In real time, the collection of Acts ends this long before the tick's slot does, besides the
+#: time the step took in the last :data:`STEP_RESERVE_TICKS` ticks: the margin for the world's
+#: thread to wake on a loaded machine and publish nothing late (:meth:`WorldServer._collect`).
+WAKE_MARGIN_S = 0.002
+STEP_RESERVE_TICKS = 20
 
 
 @dataclass
@@ -288,10 +293,19 @@ class WorldServer:
         with self._cond:
             self._cond.notify_all()
 
-    def _collect(self, tick_started: float) -> None:
-        """Wait for this tick's acts; return when all live robots answered or time is up."""
+    def _collect(self, slot_started: float) -> None:
+        """Wait for this tick's acts; return when all live robots answered or time is up.
+
+        In real time the tick must end inside its slot (ARCHITECTURE.md, Clock: "ticks at the
+        controller rate on the wall clock; a late Act means the robot keeps its previous
+        command"), so the wait ends when the slot does, less the step's recent time and
+        :data:`WAKE_MARGIN_S`. Before issue 47 it lasted a whole period from the moment the
+        Senses were out, so a tick whose agents were slow lasted the Senses' time, a period and
+        the step: an overrun by construction, which the plain-Zenoh floor (whose wait ends a
+        period after its tick starts, benchmarks/bench_zenoh_floor.py) never had."""
         if self.realtime:
-            deadline = tick_started + self.world.tick_s
+            recent_steps = self.stats.phases_s["step"][-STEP_RESERVE_TICKS:]
+            deadline = slot_started + self.world.tick_s - max(recent_steps, default=0.0) - WAKE_MARGIN_S
         else:
             deadline = time.monotonic() + self.act_timeout_s
         with self._cond:
@@ -368,9 +382,10 @@ class WorldServer:
                 c0 = time.thread_time()
                 self.tap.sensed(senses)
                 self.stats.tap_cpu_s += time.thread_time() - c0
-            started = time.monotonic()
             t_sensed = time.perf_counter()
-            self._collect(started)
+            # the slot's start on the wall clock (real time: where _pace put it; a tick that
+            # starts late has the rest of its slot, so the next one starts on time)
+            self._collect(next_tick_at)
             t_collected = time.perf_counter()
             with self._cond:
                 self._current_tick = -1  # acts arriving now are late
