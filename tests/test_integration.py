@@ -229,6 +229,29 @@ def test_realtime_mode_holds_ten_hertz(tmp_path):
         assert min(o["sense_put"], o["collect"], o["step"]) >= 0, o
 
 
+def test_a_silent_agent_makes_its_acts_late_not_the_realtime_ticks(tmp_path):
+    # Issue 47: the real-time wait for Acts lasted a whole period from the moment the Senses were
+    # out, so every tick that waited for a silent agent overran (Senses + 100 ms + step). The
+    # tick now ends inside its slot: the stopped agent's Acts are late, the clock keeps 10 Hz.
+    _, path = _scenario(tmp_path, ["world.robots=3", "world.duration_s=6.0"])
+    stop_s = 1.5  # 15 ticks; the agent keeps its liveliness token (Zenoh's lease is 10 s)
+    with supervised() as sup:
+        swarm = Swarm(sup, tmp_path, path, robots=3, realtime=True)
+        with WorldWatch(swarm.endpoint, swarm.keys) as watch:
+            assert watch.wait_for(lambda s: s.tick >= 20, 60), "the run never reached tick 20"
+            os.kill(swarm.agents[1].pid, signal.SIGSTOP)
+            try:
+                time.sleep(stop_s)  # the fault itself is a duration: the agent is stopped this long
+            finally:
+                os.kill(swarm.agents[1].pid, signal.SIGCONT)
+            result = swarm.results()
+    t = result["transport"]
+    assert result["reason"] == "completed" and t["ticks"] == 60, t
+    assert t["late_acts"] >= 10, t  # the stopped agent's, about 15
+    assert t["overruns_after_1s"] <= 3, t  # before: one per tick of the stop, about 15
+    assert t["stalls"] == 0, t
+
+
 def test_a_paused_realtime_world_resumes_from_now_without_a_burst(tmp_path):
     # Issue 47: after SIGCONT the real-time world ran the missed ticks back to back. The clock's
     # rule (world/server.py: _pace): a stall longer than a period restarts it from now, so the
