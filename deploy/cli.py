@@ -251,7 +251,9 @@ def main_world(args) -> int:
 def main_agent(args) -> int:
     stop = _install_stop()
     if args.nice:
-        os.nice(args.nice)
+        from swarmloc.deploy.launch import lower_priority
+
+        lower_priority(args.nice)
     _compile_kernels(args.family)  # before joining: a joined agent is ready to answer its first Sense
     return serve_agent(args, stop)
 
