@@ -52,7 +52,7 @@ from dataclasses import dataclass
 
 import zenoh
 
-from swarmloc.deploy.launch import ONE_THREAD_ZENOH_RUNTIME, WORLD_ZENOH_RUNTIME, lower_priority
+from swarmloc.deploy.launch import ONE_THREAD_ZENOH_RUNTIME, WORLD_ZENOH_RUNTIME
 
 PAYLOAD_BYTES = 100
 #: Environment variables the user set before main changed any (a ZENOH_RUNTIME of the user's
@@ -361,7 +361,7 @@ def main() -> int:
         return serve_router(args.serve_router)
     if args.robot is not None:
         if args.nice:
-            lower_priority(args.nice)  # as swarmloc's agents (deploy/launch.py)
+            os.nice(args.nice)
         return robot(args.connect, args.run, args.robot, args.codec, args.direct_callbacks, args.shm_off)
     if args.as_agents:  # before this process opens its first session, when Zenoh reads it
         os.environ.setdefault("ZENOH_RUNTIME", WORLD_ZENOH_RUNTIME)

@@ -251,9 +251,7 @@ def main_world(args) -> int:
 def main_agent(args) -> int:
     stop = _install_stop()
     if args.nice:
-        from swarmloc.deploy.launch import lower_priority
-
-        lower_priority(args.nice)
+        os.nice(args.nice)
     _compile_kernels(args.family)  # before joining: a joined agent is ready to answer its first Sense
     return serve_agent(args, stop)
 

@@ -92,29 +92,6 @@ class Supervisor:
                 proc.wait()
 
 
-def lower_priority(nice: int, autogroup: str = "/proc/self/autogroup") -> None:
-    """Run this process (and the children it forks) at CPU priority ``nice``.
-
-    ``os.nice`` alone does not reach the world-server: Linux schedules each session's processes
-    as one group (``sched_autogroup``, on by default) and shares the CPU between groups before
-    nice is looked at, so agents at nice 5 in sessions of their own (every piece of a local run is
-    started in one) still weighed as much as the world. A session leader therefore also lowers
-    its group's weight (writing to ``/proc/self/autogroup``, which any process may do upwards;
-    left alone without that file, or where the process shares its session, a shell's
-    for example). Measured at 550 real-time agents (issue 47): the world's loop waited 41.7 ms
-    (p99) in the run queue while it put its Senses, for 4.3 ms of CPU."""
-    if nice <= 0:
-        return
-    os.nice(nice)
-    if os.getsid(0) != os.getpid():
-        return
-    try:
-        with open(autogroup, "w", encoding="ascii") as f:
-            f.write(str(nice))
-    except OSError:
-        pass  # no autogroups here (a kernel without them, or a container that hides the file)
-
-
 def _signal_group(proc: subprocess.Popen, sig: int) -> None:
     try:
         os.killpg(proc.pid, sig)

@@ -508,34 +508,3 @@ def test_agent_server_stopped_before_it_forks_exits_and_forks_nothing(tmp_path):
             proc.wait()
     assert proc.returncode in (128 + signal.SIGTERM, -signal.SIGTERM)
     assert b"pid" not in out and not list(tmp_path.glob("agent-*.log"))
-
-
-_LOWER = """
-import os, sys
-from swarmloc.deploy.launch import lower_priority
-lower_priority(int(sys.argv[1]), autogroup=sys.argv[2])
-print(os.nice(0))
-"""
-
-
-@pytest.mark.parametrize("new_session", [True, False])
-def test_lower_priority_lowers_a_session_leaders_group_and_only_its_own(tmp_path, new_session):
-    # Issue 47: agents at nice 5 in sessions of their own weighed as much as the world, since
-    # Linux shares the CPU between session groups (sched_autogroup) before it looks at nice.
-    group = tmp_path / "autogroup"
-    group.write_text("")
-    proc = subprocess.run([sys.executable, "-c", _LOWER, "5", str(group)], capture_output=True, text=True,
-                          timeout=60, start_new_session=new_session, check=False)
-    assert proc.returncode == 0, proc.stderr
-    assert int(proc.stdout) == min(os.nice(0) + 5, 19)  # the process itself, in both cases
-    # the group's weight only where the process leads its session (never a shell's whole session)
-    assert group.read_text() == ("5" if new_session else "")
-
-
-@pytest.mark.skipif(not Path("/proc/self/autogroup").exists(), reason="this kernel has no session groups")
-def test_lower_priority_reaches_the_kernels_session_group():
-    code = _LOWER.replace("print(os.nice(0))", "print(open('/proc/self/autogroup').read())")
-    proc = subprocess.run([sys.executable, "-c", code, "4", "/proc/self/autogroup"], capture_output=True,
-                          text=True, timeout=60, start_new_session=True, check=False)
-    assert proc.returncode == 0, proc.stderr
-    assert proc.stdout.split()[-1] == "4", proc.stdout  # "/autogroup-N nice 4"

@@ -53,7 +53,7 @@ MAX_OVERRUNS_KEPT = 20
 #: the world's thread to wake on a loaded machine (:meth:`WorldServer._collect`).
 STEP_RESERVE_TICKS = 20
 MAX_STEP_RESERVE_SHARE = 0.25
-WAKE_MARGIN_S = 0.005
+WAKE_MARGIN_S = 0.002
 
 
 @dataclass

@@ -159,9 +159,7 @@ def serve(args) -> int:
                   f"{parent if parent is not None else os.getppid()}) is gone; not starting", file=sys.stderr)
             return 1
     if args.nice:
-        from swarmloc.deploy.launch import lower_priority
-
-        lower_priority(args.nice)  # inherited by every child
+        os.nice(args.nice)  # inherited by every child
     log_dir = Path(args.log_dir) if args.log_dir else None
     if log_dir is not None:
         log_dir.mkdir(parents=True, exist_ok=True)
