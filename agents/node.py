@@ -37,7 +37,7 @@ from swarmloc.protocol.messages import (
     decode,
     encode,
 )
-from swarmloc.protocol.session import keep_thread_state
+from swarmloc.protocol.session import direct_callback
 
 log = logging.getLogger("swarmloc.agent")
 
@@ -147,9 +147,9 @@ class AgentNode:
         )
         # These two only set a flag: run on Zenoh's receiving thread (indirect=False), not on a
         # Python thread of their own each, which every callback subscriber otherwise gets.
-        self._decls.append(s.declare_subscriber(k.run_end, _direct(self._on_end)))
+        self._decls.append(s.declare_subscriber(k.run_end, direct_callback(self._on_end)))
         self._decls.append(
-            s.liveliness().declare_subscriber(k.world_alive, _direct(self._on_world_alive), history=True)
+            s.liveliness().declare_subscriber(k.world_alive, direct_callback(self._on_world_alive), history=True)
         )
         declare = getattr(self.brain, "declare", None)
         if declare is not None:  # a brain with keys of its own (vision agents' team keys)
@@ -160,7 +160,7 @@ class AgentNode:
         # so the other brains keep a thread of their own.
         on_sense = self._on_sense
         if getattr(self.brain, "SENSE_ON_NETWORK_THREAD", False):
-            on_sense = _direct(on_sense)
+            on_sense = direct_callback(on_sense)
         self._decls.append(s.declare_subscriber(k.sense(self.robot_id), on_sense))
         # Declared last: the world sees us only once we can hear it.
         self._token = s.liveliness().declare_token(k.alive(self.robot_id))
@@ -181,18 +181,6 @@ class AgentNode:
             if now - self.last_sense_at > world_timeout_s:
                 return f"no sense from the world for {world_timeout_s:.0f} s"
         return self.end_reason
-
-
-def _direct(callback) -> zenoh.handlers.Callback:
-    """``callback`` run on the Zenoh thread that received the sample (no Python thread of its
-    own); for callbacks that return at once. That thread keeps its Python thread state between
-    calls (protocol/session.py: keep_thread_state; 300 real-time e-puck agents: 0.57 -> 0.53
-    cores in all, benchmarks/bench_scale.py, issue 47)."""
-    def pinned(sample: zenoh.Sample) -> None:
-        keep_thread_state()
-        callback(sample)
-
-    return zenoh.handlers.Callback(pinned, indirect=False)
 
 
 def run_agent(

@@ -302,3 +302,16 @@ def keep_thread_state() -> None:
     if not getattr(_pinned, "done", False):
         ctypes.pythonapi.PyGILState_Ensure()
         _pinned.done = True
+
+
+def direct_callback(callback) -> zenoh.handlers.Callback:
+    """``callback`` run on the Zenoh thread that received the sample (``indirect=False``: no
+    Python thread of its own, no hand-over per message); for callbacks that return at once.
+    That thread keeps its Python thread state between calls (:func:`keep_thread_state`). Used
+    by the agents (agents/node.py) and by the world-server for its Acts (world/server.py)."""
+    def pinned(sample: zenoh.Sample) -> None:
+        keep_thread_state()
+        callback(sample)
+
+    return zenoh.handlers.Callback(pinned, indirect=False)
+

@@ -40,6 +40,7 @@ from swarmloc.protocol.messages import (
     decode,
     encode,
 )
+from swarmloc.protocol.session import direct_callback
 from swarmloc.world.service import ServedWorld
 
 log = logging.getLogger("swarmloc.world")
@@ -248,11 +249,13 @@ class WorldServer:
     def declare(self) -> None:
         s, k = self.session, self.keys
         self._decls.append(s.declare_queryable(k.join, self._on_join))
-        # The Acts never run Python on Zenoh's receiving threads: a world that received and routed
-        # on one thread (Zenoh's one-thread runtime, the Acts decoded on it) used 45 % less CPU
-        # at 300 agents, but tests/test_fuzz.py's flood stalled it behind a slow agent's link and
-        # the flooding session closed its transport (docs/design.md, "600 agents", issue 47).
-        self._decls.append(s.declare_subscriber(k.act_all, self._on_act))
+        # The Acts are decoded on Zenoh's two receiving workers (deploy/launch.py:
+        # WORLD_ZENOH_RUNTIME), not handed to a Python thread one by one: at 400 real-time
+        # agents the world's CPU went from 436-441 to 318-366 ms a second, tick p99 from 95 to
+        # 72-80 ms, and 100 lockstep agents from 59-72 to 82-100 ticks/s (issue 47). Two workers,
+        # not one: on Zenoh's one-thread runtime tests/test_fuzz.py's flood stalled the world
+        # behind a slow agent's link (docs/design.md, "600 agents"); on two it passes.
+        self._decls.append(s.declare_subscriber(k.act_all, direct_callback(self._on_act)))
         self._decls.append(s.liveliness().declare_subscriber(k.alive_all, self._on_alive, history=True))
         self._sense_pub = [
             s.declare_publisher(k.sense(i), congestion_control=zenoh.CongestionControl.BLOCK)
