@@ -305,10 +305,11 @@ class WorldServer:
         In real time the tick must end inside its slot (ARCHITECTURE.md, Clock: "ticks at the
         controller rate on the wall clock; a late Act means the robot keeps its previous
         command"), so the wait ends when the slot does, less the step's recent time and
-        :data:`WAKE_MARGIN_S` (:data:`STEP_RESERVE_TICKS` says how). Before issue 47 it lasted a whole period from the moment the
-        Senses were out, so a tick whose agents were slow lasted the Senses' time, a period and
-        the step: an overrun by construction, which the plain-Zenoh floor (whose wait ends a
-        period after its tick starts, benchmarks/bench_zenoh_floor.py) never had."""
+        :data:`WAKE_MARGIN_S` (:data:`STEP_RESERVE_TICKS` says how). Before issue 47 it lasted
+        a whole period from the moment the Senses were out, so a tick whose agents were slow
+        lasted the Senses' time, a period and the step: an overrun by construction, which the
+        plain-Zenoh floor (whose wait ends a period after its tick starts,
+        benchmarks/bench_zenoh_floor.py) never had."""
         if self.realtime:
             period = self.world.tick_s
             recent_steps = self.stats.phases_s["step"][-STEP_RESERVE_TICKS:]
