@@ -15,8 +15,8 @@ for a run with late overruns the first of them, phase by phase. The memory is re
 (:data:`MEMORY_PACE_S`), after the CPU window, and from :data:`MEMORY_SAMPLE` agents scaled to
 all, so as not to disturb the run. After the sizes
 given it goes on by ``--step`` agents while 10 Hz holds (10.0 ticks/s, p99 under the 100 ms
-period, no overrun after the first second, at most 1 % of robot-ticks without their Act), up to ``--max``, and prints the largest swarm that
-held. With ``--floor`` each size also runs the plain-Zenoh floor in real time, right after
+period, no overrun after the first second, at most 1 % of robot-ticks without their Act), up
+to ``--max``, and prints the largest swarm that held. With ``--floor`` each size also runs the plain-Zenoh floor in real time, right after
 (benchmarks/bench_zenoh_floor.py: the same 10 Hz loop, one 100-byte message each way per robot
 and tick, robots that do nothing else, Zenoh configured as swarmloc's e-puck agents): if the
 floor cannot hold 10 Hz at a size on this machine, swarmloc cannot either. ``--floor-only``

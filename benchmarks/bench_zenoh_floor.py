@@ -55,9 +55,9 @@ import zenoh
 from swarmloc.deploy.launch import ONE_THREAD_ZENOH_RUNTIME, WORLD_ZENOH_RUNTIME
 
 PAYLOAD_BYTES = 100
-#: Environment variables the user set before main changed any (a ZENOH_RUNTIME of the user's
-#: reaches the robots too; the world's own does not).
-_USER_ENV = frozenset(os.environ)
+#: The user's own ZENOH_RUNTIME, if any: it reaches the robots too (main sets the world's own
+#: in this process's environment, which the robots must not inherit).
+_USER_RUNTIME = os.environ.get("ZENOH_RUNTIME")
 #: The real-time period (the e-puck controller's 10 Hz).
 PERIOD_S = 0.1
 
@@ -199,9 +199,10 @@ def _swarm(n: int, topology: str, settings: Settings):
 
             live = session.liveliness().declare_subscriber(f"floor/{run}/alive/*", on_alive, history=True)
             t0 = time.perf_counter()
-            # The robots' runtime is theirs alone, never the world's (set in this process by main)
-            env = {**os.environ, "ZENOH_RUNTIME": ONE_THREAD_ZENOH_RUNTIME} if settings.one_thread else \
-                {k: v for k, v in os.environ.items() if k != "ZENOH_RUNTIME" or k in _USER_ENV}
+            runtime = ONE_THREAD_ZENOH_RUNTIME if settings.one_thread else _USER_RUNTIME
+            env = {k: v for k, v in os.environ.items() if k != "ZENOH_RUNTIME"}
+            if runtime:
+                env["ZENOH_RUNTIME"] = runtime
             robots = [subprocess.Popen([sys.executable, __file__, "--robot", str(i), "--connect", robot_ep,
                                         "--run", run, *settings.robot_flags()],
                                        start_new_session=True, stdout=subprocess.PIPE, text=True, env=env)

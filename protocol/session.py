@@ -314,4 +314,3 @@ def direct_callback(callback) -> zenoh.handlers.Callback:
         callback(sample)
 
     return zenoh.handlers.Callback(pinned, indirect=False)
-
